@@ -1,0 +1,3 @@
+"""photoservo: find, track and collect a floating creature from one photo."""
+
+__version__ = "0.1.0"

@@ -1,0 +1,1 @@
+"""The arm: PA-10 kinematics, wire protocol, serial link and controller emulator."""

@@ -1,0 +1,1 @@
+"""The application: config, control law, motion, simulated world, session, recording, CLI."""

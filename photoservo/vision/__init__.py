@@ -1,0 +1,1 @@
+"""Pixels to pose: rig, photo-model, fitness, GA, estimator, sources, synthetic scenes."""
