@@ -2,7 +2,8 @@ import pytest
 
 from photoservo.errors import InputError
 from photoservo.servo.cli import main
-from photoservo.servo.config import dump_config, load_config
+from photoservo.servo.config import load_config
+from photoservo.tomlconf import dump_config
 
 
 def test_defaults_load_and_dump_round_trip(tmp_path):

@@ -6,7 +6,8 @@ from __future__ import annotations
 
 import argparse
 
-from photoservo.servo.config import dump_config, load_config
+from photoservo.servo.config import load_config
+from photoservo.tomlconf import dump_config
 
 
 def add_config_options(p: argparse.ArgumentParser) -> None:
