@@ -11,12 +11,11 @@ from __future__ import annotations
 import os
 import tomllib
 from dataclasses import dataclass
-from importlib import resources
 from pathlib import Path
 from typing import Any, Sequence
 
 from photoservo.errors import InputError
-from photoservo.tomlconf import build_dataclass, read_toml
+from photoservo.tomlconf import build_dataclass, configs_dir, read_toml
 from photoservo.vision.photo_model import PhotoModelParams
 
 
@@ -25,15 +24,6 @@ class Config:
     """The effective configuration: one field per section of configs/default.toml."""
 
     photo_model: PhotoModelParams
-
-
-def configs_dir() -> Path:
-    """Folder holding the shipped TOML files (default.toml, pa10.toml, example rigs...): the
-    checkout's `configs/` when running from a source tree, else the installed package data."""
-    here = Path(__file__).resolve().parents[2] / "configs"
-    if (here / "default.toml").is_file():
-        return here
-    return Path(str(resources.files("photoservo.configs")))
 
 
 def _merge(base: dict, top: dict, src: str, prefix: str = "") -> dict:
