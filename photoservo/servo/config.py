@@ -16,6 +16,7 @@ from typing import Any, Sequence
 
 from photoservo.errors import InputError
 from photoservo.tomlconf import build_dataclass, configs_dir, read_toml
+from photoservo.servo.control import ServoParams
 from photoservo.vision.photo_model import PhotoModelParams
 
 
@@ -24,6 +25,7 @@ class Config:
     """The effective configuration: one field per section of configs/default.toml."""
 
     photo_model: PhotoModelParams
+    servo: ServoParams
 
 
 def _merge(base: dict, top: dict, src: str, prefix: str = "") -> dict:
