@@ -17,6 +17,7 @@ from typing import Any, Sequence
 from photoservo.errors import InputError
 from photoservo.tomlconf import build_dataclass, configs_dir, read_toml
 from photoservo.servo.control import ServoParams
+from photoservo.vision.fitness import FitnessParams
 from photoservo.vision.photo_model import PhotoModelParams
 
 
@@ -25,6 +26,7 @@ class Config:
     """The effective configuration: one field per section of configs/default.toml."""
 
     photo_model: PhotoModelParams
+    fitness: FitnessParams
     servo: ServoParams
 
 

@@ -1,0 +1,226 @@
+"""Stereo fitness of the photo-model (method step 3) — the hot path of the estimator.
+
+A candidate is a pose of the model in the LEFT camera frame and the photo's scale alpha:
+
+    X_left  = R · X_model + t,        X_model = (u/alpha, v/alpha, 0)  mm   (method step 2)
+    X_right = R_s · X_left + T_s                                           (rig [stereo])
+
+Every inner point S_in and outer point S_out of the photo-model is projected into both images
+with the rig's pinhole + OpenCV distortion model (== `cv2.projectPoints`), rounded to the
+nearest pixel, and the hue h there is read from the frame's hue image.
+
+Per camera c in {L, R} (method step 3, the "textbook" form):
+
+    s_in(i)  = +w_in_match      if h != NO_HUE and d(h, hue_i) <= tol
+               -w_in_mismatch   if h != NO_HUE and d(h, hue_i) >  tol
+               0                if h == NO_HUE                    (glare, foam, shadow)
+               -w_outside       if the point falls outside the image or behind the camera
+    s_out(j) = +w_out_match     if h != NO_HUE and h is not a target hue
+               -w_out_mismatch  if h != NO_HUE and h is a target hue (model.target_hues)
+               0                if h == NO_HUE
+               -w_outside       if outside / behind
+
+    F_c = ( sum_i s_in(i) + sum_j s_out(j) ) / ( w_in_match·N_in + w_out_match·N_out )
+
+d is the circular hue distance (0..90 OpenCV steps). The denominator is fixed, so a perfect
+match scores exactly 1.0 and a pixel without hue neither rewards nor punishes (it contributes 0,
+and it cannot raise the score by shrinking the denominator). The two cameras combine as
+(`[fitness] combine`):
+
+    mean:     F = (F_L + F_R) / 2                    (the paper's form, default)
+    min:      F = min(F_L, F_R)                      (demand both cameras)
+    product:  F = max(F_L, 0) · max(F_R, 0)          (demand both; 1.0 still means perfect)
+
+Two implementations share one API: `fitness_reference` (vectorised numpy, built on
+`rig.project_points`, the specification) and a compiled numba kernel used by `fitness` when
+`[fitness] kernel = "numba"`. Both count, per individual and camera, how many points fell in
+each case; the same `_combine` turns counts into F, so they agree exactly.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Literal
+
+import numpy as np
+
+from photoservo.errors import InputError
+from photoservo.vision.photo_model import (
+    HUE_BINS,
+    PhotoModel,
+    hue_distance,
+    hue_image,
+)
+from photoservo.vision.rig import Rig, project_points
+
+# Columns of the per-camera count array (P, 2, N_COUNTS).
+IN_MATCH, IN_MISMATCH, OUT_MATCH, OUT_MISMATCH, OUTSIDE = range(5)
+N_COUNTS = 5
+
+
+@dataclass(frozen=True)
+class FitnessParams:
+    """[fitness] config: weights and tolerances of the stereo fitness (method step 3)."""
+
+    hue_tolerance: int  # an inner point agrees when the circular hue distance is <= this (0..90)
+    min_saturation: int  # 0..255: image pixels greyer than this carry no hue
+    min_value: int  # 0..255: image pixels darker than this carry no hue
+    w_inner_match: float  # reward per inner point on its own hue
+    w_inner_mismatch: float  # cost per inner point on another hue
+    w_outer_match: float  # reward per outer point on a hue that is not the target's
+    w_outer_mismatch: float  # cost per outer point on a target hue
+    w_outside: float  # cost per point projected outside the image or behind the camera
+    combine: Literal["mean", "min", "product"]  # how left and right scores combine
+
+    def validate(self, where: str) -> None:
+        def key(n: str) -> str:
+            return f"{where}.{n}" if where else n
+
+        if not 0 <= self.hue_tolerance <= 90:
+            raise InputError(f"config key '{key('hue_tolerance')}': must be 0..90, got {self.hue_tolerance}")
+        for n in ("min_saturation", "min_value"):
+            v = getattr(self, n)
+            if not 0 <= v <= 255:
+                raise InputError(f"config key '{key(n)}': must be 0..255, got {v}")
+        for n in ("w_inner_match", "w_inner_mismatch", "w_outer_match", "w_outer_mismatch", "w_outside"):
+            v = getattr(self, n)
+            if not (np.isfinite(v) and v >= 0):
+                raise InputError(f"config key '{key(n)}': must be a finite number >= 0, got {v}")
+        if self.w_inner_match + self.w_outer_match <= 0:
+            raise InputError(
+                f"config key '{key('w_inner_match')}': w_inner_match + w_outer_match must be > 0"
+            )
+
+
+@dataclass(frozen=True)
+class StereoHue:
+    """One stereo frame as hue images (OpenCV hue 0..179, NO_HUE = 255 where a pixel is too grey
+    or too dark to carry hue). `left`, `right`: (H, W) uint8, C-contiguous."""
+
+    left: np.ndarray
+    right: np.ndarray
+
+
+def stereo_hue(left_bgr: np.ndarray, right_bgr: np.ndarray, params: FitnessParams) -> StereoHue:
+    """Hue images of a stereo pair (BGR uint8) for `fitness`, with the [fitness] saturation and
+    value floors (glare, foam and shadow get NO_HUE)."""
+    def one(img: np.ndarray) -> np.ndarray:
+        return np.ascontiguousarray(hue_image(img, params.min_saturation, params.min_value))
+
+    return StereoHue(left=one(left_bgr), right=one(right_bgr))
+
+
+@dataclass(frozen=True)
+class ModelProjection:
+    """Pixel coordinates of the model's sampling points, (P, N, 2) each; NaN behind a camera."""
+
+    inner_left: np.ndarray
+    outer_left: np.ndarray
+    inner_right: np.ndarray
+    outer_right: np.ndarray
+
+
+def _poses(R: np.ndarray, t: np.ndarray, alpha: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Population arrays as float64 (P,3,3), (P,3), (P,); a single pose is promoted to P = 1."""
+    R = np.asarray(R, dtype=np.float64)
+    t = np.asarray(t, dtype=np.float64)
+    alpha = np.asarray(alpha, dtype=np.float64)
+    if R.ndim == 2:
+        R, t, alpha = R[None], t[None], alpha.reshape(1)
+    P = R.shape[0]
+    if R.shape != (P, 3, 3) or t.shape != (P, 3) or alpha.shape != (P,):
+        raise ValueError(f"population shapes must be R (P,3,3), t (P,3), alpha (P,); got "
+                         f"{R.shape}, {t.shape}, {alpha.shape}")
+    return R, t, alpha
+
+
+def _model_points_left(R: np.ndarray, t: np.ndarray, alpha: np.ndarray, uv: np.ndarray) -> np.ndarray:
+    """X_left = R · (u/alpha, v/alpha, 0) + t for every individual: (P, N, 3) mm."""
+    # R[:, :, :2] @ (uv / alpha)^T, arranged as (P, N, 3)
+    scaled = uv[None, :, :] / alpha[:, None, None]  # (P, N, 2)
+    return np.einsum("pij,pnj->pni", R[:, :, :2], scaled) + t[:, None, :]
+
+
+def project_model(R: np.ndarray, t: np.ndarray, alpha: np.ndarray, model: PhotoModel, rig: Rig) -> ModelProjection:
+    """Project the inner and outer sampling points of `model` at poses (R, t, alpha) into both
+    cameras of `rig` (method steps 2-3). R (P,3,3) or (3,3), t mm, alpha px/mm."""
+    R, t, alpha = _poses(R, t, alpha)
+    out = []
+    for uv in (model.inner_uv, model.outer_uv):
+        XL = _model_points_left(R, t, alpha, np.asarray(uv, dtype=np.float64).reshape(-1, 2))
+        XR = XL @ rig.R.T + rig.T
+        out.append((project_points(XL, rig.left), project_points(XR, rig.right)))
+    (il, ir), (ol, orr) = out
+    return ModelProjection(inner_left=il, outer_left=ol, inner_right=ir, outer_right=orr)
+
+
+def _sample(uv: np.ndarray, hue: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Nearest-pixel hue at (P, N, 2) pixel coordinates: (hue (P,N) int, inside (P,N) bool).
+    Pixel centres are at integer coordinates (OpenCV): pixel k covers [k - 0.5, k + 0.5)."""
+    Hh, Ww = hue.shape
+    with np.errstate(invalid="ignore"):
+        c = np.floor(uv + 0.5)
+        inside = (c[..., 0] >= 0) & (c[..., 0] < Ww) & (c[..., 1] >= 0) & (c[..., 1] < Hh)
+    ci = np.where(inside, c[..., 0], 0).astype(np.intp)
+    ri = np.where(inside, c[..., 1], 0).astype(np.intp)
+    return hue[ri, ci].astype(np.int16), inside
+
+
+def _count_camera(uv_in: np.ndarray, uv_out: np.ndarray, hue: np.ndarray, model: PhotoModel,
+                  params: FitnessParams) -> np.ndarray:
+    """Case counts (P, N_COUNTS) of one camera — the per-point cases of the module docstring."""
+    h_in, ok_in = _sample(uv_in, hue)
+    h_out, ok_out = _sample(uv_out, hue)
+    has_in = ok_in & (h_in < HUE_BINS)
+    has_out = ok_out & (h_out < HUE_BINS)
+    agree = hue_distance(h_in, model.inner_hue[None, :]) <= params.hue_tolerance
+    is_target = np.asarray(model.target_hues, dtype=bool)[np.where(has_out, h_out, 0)]
+    counts = np.empty((uv_in.shape[0], N_COUNTS), dtype=np.int64)
+    counts[:, IN_MATCH] = (has_in & agree).sum(axis=1)
+    counts[:, IN_MISMATCH] = (has_in & ~agree).sum(axis=1)
+    counts[:, OUT_MATCH] = (has_out & ~is_target).sum(axis=1)
+    counts[:, OUT_MISMATCH] = (has_out & is_target).sum(axis=1)
+    counts[:, OUTSIDE] = (~ok_in).sum(axis=1) + (~ok_out).sum(axis=1)
+    return counts
+
+
+def counts_reference(R: np.ndarray, t: np.ndarray, alpha: np.ndarray, model: PhotoModel,
+                     frame: StereoHue, rig: Rig, params: FitnessParams) -> np.ndarray:
+    """Per-individual, per-camera case counts (P, 2, N_COUNTS), numpy reference."""
+    p = project_model(R, t, alpha, model, rig)
+    left = _count_camera(p.inner_left, p.outer_left, frame.left, model, params)
+    right = _count_camera(p.inner_right, p.outer_right, frame.right, model, params)
+    return np.stack([left, right], axis=1)
+
+
+def _combine(counts: np.ndarray, n_in: int, n_out: int, params: FitnessParams) -> np.ndarray:
+    """Counts (P, 2, N_COUNTS) -> fitness (P,): F_c per camera, then the [fitness] combine."""
+    c = counts.astype(np.float64)
+    num = (params.w_inner_match * c[..., IN_MATCH] - params.w_inner_mismatch * c[..., IN_MISMATCH]
+           + params.w_outer_match * c[..., OUT_MATCH] - params.w_outer_mismatch * c[..., OUT_MISMATCH]
+           - params.w_outside * c[..., OUTSIDE])
+    den = params.w_inner_match * n_in + params.w_outer_match * n_out
+    F = num / den if den > 0 else np.zeros_like(num)
+    if params.combine == "mean":
+        return 0.5 * (F[:, 0] + F[:, 1])
+    if params.combine == "min":
+        return np.minimum(F[:, 0], F[:, 1])
+    return np.maximum(F[:, 0], 0.0) * np.maximum(F[:, 1], 0.0)
+
+
+def fitness_reference(R: np.ndarray, t: np.ndarray, alpha: np.ndarray, model: PhotoModel,
+                      frame: StereoHue, rig: Rig, params: FitnessParams) -> np.ndarray:
+    """Stereo fitness (P,) of a population, numpy reference of method step 3 (module docstring)."""
+    counts = counts_reference(R, t, alpha, model, frame, rig, params)
+    return _combine(counts, len(model.inner_uv), len(model.outer_uv), params)
+
+
+def fitness(R: np.ndarray, t: np.ndarray, alpha: np.ndarray, model: PhotoModel, frame: StereoHue,
+            rig: Rig, params: FitnessParams) -> np.ndarray:
+    """Stereo fitness (P,) of a whole population (method step 3; formula in the module docstring).
+
+    R: (P, 3, 3) rotations and t: (P, 3) mm, model in the left camera frame
+    (X_left = R · X_model + t); alpha: (P,) px/mm. A single pose ((3,3), (3,), scalar) gives (1,).
+    1.0 is a perfect match in both cameras; 0 is "nothing seen".
+    """
+    return fitness_reference(R, t, alpha, model, frame, rig, params)
