@@ -181,20 +181,23 @@ def _q(q) -> np.ndarray:
 
 def fk_frames(q) -> np.ndarray:
     """All link frames in the base frame, (8, 4, 4): [0] the base (identity), [i] = A_1 ... A_i,
-    [7] the flange. Frame i-1's z axis is joint i's axis. Used to draw the arm and by `jacobian`."""
-    q = _q(q)
-    ct, st = np.cos(q), np.sin(q)
-    frames = np.empty((N_JOINTS + 1, 4, 4))
-    frames[0] = np.eye(4)
-    T = np.eye(4)
+    [7] the flange. Frame i-1's z axis is joint i's axis. Used to draw the arm and by `jacobian`.
+    A batch of configurations (N, 7) gives (N, 8, 4, 4)."""
+    q = np.asarray(q, dtype=float)
+    if q.shape[-1:] != (N_JOINTS,) or q.ndim > 2:
+        raise ValueError(f"expected {N_JOINTS} joint angles (or N x {N_JOINTS}), got shape {q.shape}")
+    Q = q.reshape(-1, N_JOINTS)
+    ct, st = np.cos(Q), np.sin(Q)
+    zero, one = np.zeros_like(Q), np.ones_like(Q)
+    A = np.stack([ct, -st * _CA, st * _SA, DH_A_MM * ct,
+                  st, ct * _CA, -ct * _SA, DH_A_MM * st,
+                  zero, _SA + zero, _CA + zero, DH_D_MM + zero,
+                  zero, zero, zero, one], axis=-1).reshape(Q.shape[0], N_JOINTS, 4, 4)
+    frames = np.empty((Q.shape[0], N_JOINTS + 1, 4, 4))
+    frames[:, 0] = np.eye(4)
     for i in range(N_JOINTS):
-        A = np.array([[ct[i], -st[i] * _CA[i], st[i] * _SA[i], DH_A_MM[i] * ct[i]],
-                      [st[i], ct[i] * _CA[i], -ct[i] * _SA[i], DH_A_MM[i] * st[i]],
-                      [0.0, _SA[i], _CA[i], DH_D_MM[i]],
-                      [0.0, 0.0, 0.0, 1.0]])
-        T = T @ A
-        frames[i + 1] = T
-    return frames
+        frames[:, i + 1] = frames[:, i] @ A[:, i]
+    return frames[0] if q.ndim == 1 else frames
 
 
 def fk(q, T_flange_tool: np.ndarray | None = None) -> np.ndarray:
@@ -217,7 +220,10 @@ def jacobian(q, T_flange_tool: np.ndarray | None = None) -> np.ndarray:
     z = F[:-1, :3, 2]
     o = F[:-1, :3, 3]
     J = np.empty((6, N_JOINTS))
-    J[:3] = np.cross(z, p - o).T
+    r = p - o
+    J[0] = z[:, 1] * r[:, 2] - z[:, 2] * r[:, 1]  # z_{i-1} × (p - o_{i-1}), written out (np.cross is slow)
+    J[1] = z[:, 2] * r[:, 0] - z[:, 0] * r[:, 2]
+    J[2] = z[:, 0] * r[:, 1] - z[:, 1] * r[:, 0]
     J[3:] = z.T
     return J
 

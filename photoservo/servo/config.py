@@ -17,6 +17,7 @@ from typing import Any, Sequence
 from photoservo.errors import InputError
 from photoservo.tomlconf import build_dataclass, configs_dir, read_toml
 from photoservo.servo.control import ServoParams
+from photoservo.servo.motion import MotionParams
 from photoservo.vision.fitness import FitnessParams
 from photoservo.vision.photo_model import PhotoModelParams
 
@@ -28,6 +29,7 @@ class Config:
     photo_model: PhotoModelParams
     fitness: FitnessParams
     servo: ServoParams
+    motion: MotionParams
 
 
 def _merge(base: dict, top: dict, src: str, prefix: str = "") -> dict:

@@ -1,0 +1,452 @@
+"""Jerk-limited joint motion for the PA-10 with Ruckig (method step 6: "joint motion is made
+jerk-limited with Ruckig and streamed to the arm's controller").
+
+One step per control period (default 250 Hz), ALWAYS starting from the measured joint state:
+
+    inp.current_position, inp.current_velocity = q_meas, dq_meas
+    otg.update(inp, out)  ->  Setpoint(out.new_position, out.new_velocity, out.new_acceleration)
+
+The arm does not report acceleration, so the current acceleration is the one we last told it
+(zero at the start). Pure code: arrays in, setpoints out, no I/O and no clock.
+
+Ruckig's free edition ignores position limits, so the safety layer is ours. Each step, on top
+of the plain Ruckig step:
+
+1. Speed override (0-100 %) scales the joint speed limits; 0 % makes a controlled stop.
+2. Joint ranges: every joint keeps `joint_margin_deg` clear of its range ends for targets.
+   While moving, a joint's speed toward a range end is capped at the speed from which it can
+   still stop (jerk-limited) within half the margin of that end: it slows down before it would
+   overrun.
+3. Tool-speed cap: the speed of the tool point is kept under `tool_speed_max_mm_s` (velocity
+   targets are scaled down; a move is time-scaled, v·s, a·s², j·s³, which keeps its path).
+4. Braking check: the step is accepted only if a controlled stop started from the new setpoint
+   would stay inside the joint ranges (less half the margin), above the water plane
+   (`z_min_mm`) and inside the workspace box, for the elbow, wrist, flange and tool points.
+   Otherwise the arm is told to stop instead (the previous accepted setpoint had a safe stop,
+   so stopping now is safe).
+
+Every step returns what the arm will actually be told after these clamps, with `reason`
+saying which one acted ("" when none did), as LeRobot's `send_action` does.
+
+Frames and units: joint angles in rad, base frame in mm (z up), time in s.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from ruckig import (
+    ControlInterface,
+    InputParameter,
+    OutputParameter,
+    Result,
+    Ruckig,
+    Trajectory,
+)
+
+from photoservo.errors import InputError
+from photoservo.robot.pa10 import (
+    DH_D_MM,
+    JOINT_NAMES,
+    N_JOINTS,
+    PA10Limits,
+    fk_frames,
+    jacobian,
+    tool_offset,
+)
+
+#: link frames whose origins are kept out of the water and inside the workspace: elbow (3),
+#: wrist (5) and flange (7); the tool point is checked as well.
+KEEPOUT_FRAMES = {"elbow": 3, "wrist": 5, "flange": 7}
+
+
+@dataclass(frozen=True)
+class MotionParams:
+    """[motion] config: control rate, speed override, joint margin, Cartesian keep-out."""
+
+    rate_hz: float  # control (setpoint) rate (Hz)
+    speed_override_pct: float  # 0..100: scales joint speed limits
+    joint_margin_deg: float  # kept clear at each end of every joint range (deg)
+    position_tolerance_deg: float  # a move is done when every joint is this close (deg)
+    z_min_mm: float  # the water: no checked point may go below this height (base frame, mm)
+    workspace_min_mm: tuple[float, float, float]  # workspace box, lower corner (base frame, mm)
+    workspace_max_mm: tuple[float, float, float]  # workspace box, upper corner (base frame, mm)
+    tool_speed_max_mm_s: float  # cap on the tool point's speed (mm/s)
+    tool_offset_mm: tuple[float, float, float]  # tool point in the flange frame (mm)
+
+    def validate(self, where: str) -> None:
+        def bad(key: str, why: str) -> InputError:
+            return InputError(f"config key '{where}.{key}' {why}, got {getattr(self, key)}")
+
+        if not self.rate_hz > 0:
+            raise bad("rate_hz", "must be > 0")
+        if not 0.0 <= self.speed_override_pct <= 100.0:
+            raise bad("speed_override_pct", "must be in 0..100")
+        if not self.joint_margin_deg >= 0:
+            raise bad("joint_margin_deg", "must be >= 0")
+        if not self.position_tolerance_deg > 0:
+            raise bad("position_tolerance_deg", "must be > 0")
+        if not self.tool_speed_max_mm_s > 0:
+            raise bad("tool_speed_max_mm_s", "must be > 0")
+        for i in range(3):
+            if not self.workspace_min_mm[i] < self.workspace_max_mm[i]:
+                raise bad("workspace_max_mm", f"must exceed workspace_min_mm on axis {'xyz'[i]}")
+        if not self.workspace_min_mm[2] <= self.z_min_mm < self.workspace_max_mm[2]:
+            raise bad("z_min_mm", "must lie inside the workspace box's z range")
+
+
+@dataclass(frozen=True, eq=False)
+class Setpoint:
+    """What the arm is told for the next period: joint position q (rad), velocity dq (rad/s),
+    acceleration ddq (rad/s^2). `reason` names the safety clamp that changed it ("" = none)."""
+
+    q: np.ndarray
+    dq: np.ndarray
+    ddq: np.ndarray
+    reason: str = ""
+
+
+def stopping_distance(v: np.ndarray, a_max: np.ndarray, j_max: np.ndarray) -> np.ndarray:
+    """Distance to stop from speed |v| with zero initial acceleration, jerk-limited:
+    |v| <= a²/j: d = |v|·sqrt(|v|/j); else d = |v|/2 · (|v|/a + a/j)."""
+    v = np.abs(v)
+    return np.where(v <= a_max**2 / j_max, v * np.sqrt(v / j_max), 0.5 * v * (v / a_max + a_max / j_max))
+
+
+def stopping_speed(d: np.ndarray, a_max: np.ndarray, j_max: np.ndarray) -> np.ndarray:
+    """Inverse of `stopping_distance`: the highest speed that can still stop within d >= 0."""
+    d = np.maximum(d, 0.0)
+    short = (d * d * j_max) ** (1.0 / 3.0)
+    long_ = 0.5 * (-a_max**2 / j_max + np.sqrt(a_max**4 / j_max**2 + 8.0 * a_max * d))
+    return np.where(d <= a_max**3 / j_max**2, short, long_)
+
+
+class Motion:
+    """Online jerk-limited motion at the control rate: position moves, velocity following and a
+    controlled stop, each step from the measured joint state, with the safety layer above.
+
+    >>> from photoservo.robot.pa10 import HOME_Q, load_limits
+    >>> from photoservo.servo.config import load_config
+    >>> m = Motion(load_config().motion, load_limits())
+    >>> q, dq = HOME_Q.copy(), np.zeros(7)
+    >>> target = HOME_Q + 0.1
+    >>> while not m.done:
+    ...     sp = m.move_step(q, dq, target)
+    ...     q, dq = sp.q, sp.dq          # a perfect arm; the real loop reads the link's state
+    >>> bool(np.allclose(q, target))
+    True
+    """
+
+    _BRAKE_SAMPLE_S = 0.01  # sampling step of the braking trajectory in the braking check (s)
+
+    def __init__(self, params: MotionParams, limits: PA10Limits, T_flange_tool: np.ndarray | None = None):
+        self.params = params
+        self.limits = limits
+        self.dt = 1.0 / params.rate_hz
+        self.T_flange_tool = tool_offset(0.0) if T_flange_tool is None else np.asarray(T_flange_tool, float)
+        if T_flange_tool is None:
+            self.T_flange_tool[:3, 3] = params.tool_offset_mm
+        m = math.radians(params.joint_margin_deg)
+        self.q_lo_target, self.q_hi_target = limits.q_min + m, limits.q_max - m
+        self.q_lo_safe, self.q_hi_safe = limits.q_min + m / 2, limits.q_max - m / 2
+        self.otg = Ruckig(N_JOINTS, self.dt)
+        self.inp = InputParameter(N_JOINTS)
+        self.out = OutputParameter(N_JOINTS)
+        self._brake_otg = Ruckig(N_JOINTS)
+        self._brake_inp = InputParameter(N_JOINTS)
+        self._brake_inp.control_interface = ControlInterface.Velocity
+        self._brake_inp.max_velocity = limits.dq_max
+        self._brake_inp.max_acceleration = limits.ddq_max
+        self._brake_inp.max_jerk = limits.dddq_max
+        self._brake_inp.target_velocity = np.zeros(N_JOINTS)
+        self._brake_inp.target_acceleration = np.zeros(N_JOINTS)
+        self._traj = Trajectory(N_JOINTS)
+        # length of the chain beyond each joint, up to the tool point (mm): d_j + ... + d_7 + |tool|
+        self._chain_mm = np.cumsum(DH_D_MM[::-1])[::-1] + float(np.linalg.norm(self.T_flange_tool[:3, 3]))
+        self._override = params.speed_override_pct / 100.0
+        self._last: Setpoint | None = None
+        self._target: np.ndarray | None = None
+        self._refused: str = ""
+        self._time_scale = 1.0
+        self.done = False
+
+    # ---------------------------------------------------------------- configuration and checks
+
+    @property
+    def speed_override_pct(self) -> float:
+        return 100.0 * self._override
+
+    @speed_override_pct.setter
+    def speed_override_pct(self, pct: float) -> None:
+        if not 0.0 <= pct <= 100.0:
+            raise InputError(f"speed override {pct} % is outside 0..100 %")
+        self._override = pct / 100.0
+        self._target = None  # re-plan (and re-scale) the current move at the new speed
+
+    def keepout_points(self, q: np.ndarray) -> dict[str, np.ndarray]:
+        """Base-frame positions (mm) of the points the Cartesian keep-out applies to: name ->
+        (3,) for q of shape (7,), or (N, 3) for a batch (N, 7)."""
+        F = fk_frames(q)
+        pts = {name: F[..., i, :3, 3] for name, i in KEEPOUT_FRAMES.items()}
+        pts["tool"] = (F[..., -1, :, :] @ self.T_flange_tool)[..., :3, 3]
+        return pts
+
+    def keepout_violation(self, q: np.ndarray) -> str:
+        """'' when every keep-out point at q (rad; (7,) or a path (N, 7)) is above the water
+        plane and inside the workspace box, else a message naming the point and the limit."""
+        p = self.params
+        lo, hi = np.asarray(p.workspace_min_mm), np.asarray(p.workspace_max_mm)
+        for name, x in self.keepout_points(q).items():
+            x = x.reshape(-1, 3)
+            below = x[:, 2] < p.z_min_mm
+            if below.any():
+                z = x[below, 2].min()
+                return f"the {name} would go below the water plane (z = {z:.1f} mm < z_min_mm = {p.z_min_mm:g})"
+            for i in range(3):
+                if (x[:, i] < lo[i]).any():
+                    return (f"the {name} would leave the workspace box ({'xyz'[i]} = {x[:, i].min():.1f} mm < "
+                            f"workspace_min_mm[{i}] = {lo[i]:g})")
+                if (x[:, i] > hi[i]).any():
+                    return (f"the {name} would leave the workspace box ({'xyz'[i]} = {x[:, i].max():.1f} mm > "
+                            f"workspace_max_mm[{i}] = {hi[i]:g})")
+        return ""
+
+    def check_target(self, q_target: np.ndarray, q_start: np.ndarray | None = None) -> None:
+        """Raise InputError naming the joint or the limit when q_target (rad) is outside the
+        joint ranges less the margin or its pose breaks the keep-out; with q_start, also when
+        the Ruckig path from rest at q_start to q_target crosses the keep-out."""
+        q = np.asarray(q_target, dtype=float)
+        self.limits.check(q, "target")
+        for j, n in enumerate(JOINT_NAMES):
+            if not self.q_lo_target[j] <= q[j] <= self.q_hi_target[j]:
+                raise InputError(
+                    f"target: joint {n} = {math.degrees(q[j]):.2f} deg is within joint_margin_deg = "
+                    f"{self.params.joint_margin_deg:g} of its range [{math.degrees(self.limits.q_min[j]):.1f}, "
+                    f"{math.degrees(self.limits.q_max[j]):.1f}] deg")
+        why = self.keepout_violation(q)
+        if why:
+            raise InputError(f"target: {why}")
+        if q_start is not None:
+            why = self._path_violation(np.asarray(q_start, float), np.zeros(N_JOINTS), np.zeros(N_JOINTS), q)
+            if why:
+                raise InputError(f"target: the path to it: {why}")
+
+    # ------------------------------------------------------------------------ the three steps
+
+    def move_step(self, q_meas: np.ndarray, dq_meas: np.ndarray, q_target: np.ndarray) -> Setpoint:
+        """One period of a jerk-limited move to q_target (rad), from the measured q (rad) and
+        dq (rad/s). A target outside the ranges/keep-out is refused: the arm stops and `reason`
+        says why. `done` becomes True once every joint is within position_tolerance_deg, at rest."""
+        q_target = np.asarray(q_target, dtype=float)
+        q_meas, dq_meas = np.asarray(q_meas, float), np.asarray(dq_meas, float)
+        if self._target is None or not np.array_equal(q_target, self._target):
+            self._adopt(q_meas, dq_meas, q_target)
+        if self._refused:
+            sp = self.stop_step(q_meas, dq_meas, reason=self._refused)
+            self.done = False
+            return sp
+        if self._override <= 0.0:
+            return self.stop_step(q_meas, dq_meas, reason="speed override 0 %")
+        inp = self._current(q_meas, dq_meas)
+        inp.control_interface = ControlInterface.Position
+        inp.target_position = q_target
+        inp.target_velocity = np.zeros(N_JOINTS)
+        inp.target_acceleration = np.zeros(N_JOINTS)
+        reasons = []
+        v_cap_lo, v_cap_hi = self._range_caps(q_meas)
+        sp = None
+        for _ in range(3):
+            s = self._time_scale
+            v = self._override * self.limits.dq_max * s
+            inp.max_velocity = np.maximum(np.minimum(v, v_cap_hi), 1e-6)
+            inp.min_velocity = -np.maximum(np.minimum(v, v_cap_lo), 1e-6)
+            inp.max_acceleration = self.limits.ddq_max * s * s
+            inp.max_jerk = self.limits.dddq_max * s**3
+            result = self.otg.update(inp, self.out)
+            if result not in (Result.Working, Result.Finished):
+                return self.stop_step(q_meas, dq_meas, reason=f"Ruckig refused the move ({result})")
+            sp = self._from_out()
+            speed = self._tool_speed(sp.q, sp.dq)
+            if speed <= 1.02 * self.params.tool_speed_max_mm_s:
+                break
+            self._time_scale *= self.params.tool_speed_max_mm_s / speed
+            reasons.append("tool speed cap")
+        v = self._override * self.limits.dq_max * self._time_scale
+        slowed = ((v_cap_hi < v) & (sp.dq > 0)) | ((v_cap_lo < v) & (sp.dq < 0))
+        if slowed.any():
+            reasons.append("joint range: slowing " + ", ".join(np.array(JOINT_NAMES)[slowed]))
+        checked = self._accept(q_meas, dq_meas, sp, reasons)
+        err = np.abs(q_meas - q_target)
+        self.done = bool(result == Result.Finished and np.all(err <= math.radians(self.params.position_tolerance_deg))
+                         and not checked.reason.startswith("braking"))
+        return checked
+
+    def velocity_step(self, q_meas: np.ndarray, dq_meas: np.ndarray, dq_target: np.ndarray) -> Setpoint:
+        """One period following the joint-velocity target dq_target (rad/s), e.g. from the servo
+        law's DLS solve, from the measured q (rad) and dq (rad/s). The target is clamped to the
+        overridden speed limits, the joint-range caps and the tool-speed cap before Ruckig
+        reaches it jerk-limited."""
+        q_meas, dq_meas = np.asarray(q_meas, float), np.asarray(dq_meas, float)
+        self._target = None
+        self.done = False
+        if self._override <= 0.0:
+            return self.stop_step(q_meas, dq_meas, reason="speed override 0 %")
+        dq_t = np.asarray(dq_target, dtype=float).copy()
+        if dq_t.shape != (N_JOINTS,) or not np.all(np.isfinite(dq_t)):
+            return self.stop_step(q_meas, dq_meas, reason="velocity target is not 7 finite numbers")
+        reasons = []
+        v = self._override * self.limits.dq_max
+        m = float(np.max(np.abs(dq_t) / v))
+        if m > 1.0:
+            dq_t /= m  # keep the direction
+            reasons.append("joint speed limit")
+        v_cap_lo, v_cap_hi = self._range_caps(q_meas)
+        clipped = np.clip(dq_t, -v_cap_lo, v_cap_hi)
+        if np.any(clipped != dq_t):
+            names = np.array(JOINT_NAMES)[clipped != dq_t]
+            reasons.append("joint range: slowing " + ", ".join(names))
+            dq_t = clipped
+        speed = self._tool_speed(q_meas, dq_t)
+        if speed > self.params.tool_speed_max_mm_s:
+            dq_t *= self.params.tool_speed_max_mm_s / speed
+            reasons.append("tool speed cap")
+        inp = self._current(q_meas, dq_meas)
+        inp.control_interface = ControlInterface.Velocity
+        inp.target_velocity = dq_t
+        inp.target_acceleration = np.zeros(N_JOINTS)
+        inp.max_velocity = self.limits.dq_max
+        inp.max_acceleration = self.limits.ddq_max
+        inp.max_jerk = self.limits.dddq_max
+        result = self.otg.update(inp, self.out)
+        if result not in (Result.Working, Result.Finished):
+            return self.stop_step(q_meas, dq_meas, reason=f"Ruckig refused the velocity target ({result})")
+        return self._accept(q_meas, dq_meas, self._from_out(), reasons)
+
+    def stop_step(self, q_meas: np.ndarray, dq_meas: np.ndarray, reason: str = "") -> Setpoint:
+        """One period of a controlled stop: velocity brought to zero with the full acceleration
+        and jerk limits, from the measured state. `done` is True once at rest."""
+        inp = self._current(np.asarray(q_meas, float), np.asarray(dq_meas, float))
+        inp.control_interface = ControlInterface.Velocity
+        inp.target_velocity = np.zeros(N_JOINTS)
+        inp.target_acceleration = np.zeros(N_JOINTS)
+        inp.max_velocity = self.limits.dq_max
+        inp.max_acceleration = self.limits.ddq_max
+        inp.max_jerk = self.limits.dddq_max
+        result = self.otg.update(inp, self.out)
+        if result not in (Result.Working, Result.Finished):
+            raise RuntimeError(f"Ruckig cannot plan a controlled stop ({result}); emergency-stop the arm")
+        sp = self._from_out(reason)
+        self._last = sp
+        self.done = result == Result.Finished
+        return sp
+
+    # -------------------------------------------------------------------------------- internals
+
+    def _current(self, q_meas: np.ndarray, dq_meas: np.ndarray) -> InputParameter:
+        """Ruckig's input seeded from the measured state; acceleration = the last one commanded."""
+        inp = self.inp
+        inp.current_position = q_meas
+        inp.current_velocity = dq_meas
+        inp.current_acceleration = self._last.ddq if self._last is not None else np.zeros(N_JOINTS)
+        return inp
+
+    def _from_out(self, reason: str = "") -> Setpoint:
+        o = self.out
+        return Setpoint(np.array(o.new_position), np.array(o.new_velocity), np.array(o.new_acceleration), reason)
+
+    def _adopt(self, q_meas: np.ndarray, dq_meas: np.ndarray, q_target: np.ndarray) -> None:
+        """A new move target: check it and the path, and choose the time scale that keeps the
+        tool under its speed cap along the planned path."""
+        self._target = q_target.copy()
+        self._refused = ""
+        self._time_scale = 1.0
+        try:
+            self.check_target(q_target)
+        except InputError as e:
+            self._refused = f"refused {e}"
+            return
+        if self._override <= 0:
+            return
+        acc = self._last.ddq if self._last is not None else np.zeros(N_JOINTS)
+        why = self._path_violation(q_meas, dq_meas, acc, q_target)
+        if why:
+            self._refused = f"refused target: the path to it: {why}"
+            return
+        peak = max(self._tool_speed(q, dq) for q, dq in zip(*self._samples()))
+        if peak > self.params.tool_speed_max_mm_s:
+            self._time_scale = 0.98 * self.params.tool_speed_max_mm_s / peak
+
+    def _plan(self, q0: np.ndarray, dq0: np.ndarray, a0: np.ndarray, q_target: np.ndarray) -> bool:
+        """Whole trajectory to q_target into self._traj (override applied, no time scale)."""
+        inp = InputParameter(N_JOINTS)
+        inp.current_position, inp.current_velocity, inp.current_acceleration = q0, dq0, a0
+        inp.target_position = q_target
+        inp.max_velocity = np.maximum(self._override * self.limits.dq_max, 1e-6)
+        inp.max_acceleration = self.limits.ddq_max
+        inp.max_jerk = self.limits.dddq_max
+        return Ruckig(N_JOINTS).calculate(inp, self._traj) in (Result.Working, Result.Finished)
+
+    def _samples(self, step_s: float = 0.02) -> tuple[np.ndarray, np.ndarray]:
+        """(Q, dQ), each (N, 7): self._traj every step_s, ending at its end."""
+        n = max(1, math.ceil(self._traj.duration / step_s))
+        pv = [self._traj.at_time(min(k * step_s, self._traj.duration))[:2] for k in range(n + 1)]
+        return np.array([x[0] for x in pv]), np.array([x[1] for x in pv])
+
+    def _path_violation(self, q0, dq0, a0, q_target) -> str:
+        if not self._plan(q0, dq0, a0, q_target):
+            return "Ruckig cannot plan it"
+        return self.keepout_violation(self._samples()[0])
+
+    def _range_caps(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Per joint, the highest speed (>= 0) toward the lower / upper range end from which a
+        jerk-limited stop (at 90 % of the limits, one period of look-ahead) ends inside the
+        range less half the margin."""
+        a, j = 0.9 * self.limits.ddq_max, 0.9 * self.limits.dddq_max
+        v_max = self._override * self.limits.dq_max
+        d_lo = q - self.q_lo_safe
+        d_hi = self.q_hi_safe - q
+        lo = stopping_speed(d_lo - v_max * self.dt, a, j)
+        hi = stopping_speed(d_hi - v_max * self.dt, a, j)
+        return lo, hi
+
+    def _tool_speed(self, q: np.ndarray, dq: np.ndarray) -> float:
+        return float(np.linalg.norm(jacobian(q, self.T_flange_tool)[:3] @ dq))
+
+    def _accept(self, q_meas: np.ndarray, dq_meas: np.ndarray, sp: Setpoint, reasons: list[str]) -> Setpoint:
+        """Braking check (safety layer 4): keep `sp` only if a controlled stop from it stays in
+        the ranges (less half the margin) and the keep-out; else stop from the measured state."""
+        inp = self._brake_inp
+        inp.current_position, inp.current_velocity, inp.current_acceleration = sp.q, sp.dq, sp.ddq
+        if self._brake_otg.calculate(inp, self._traj) not in (Result.Working, Result.Finished):
+            return self.stop_step(q_meas, dq_meas, reason="braking check: Ruckig cannot plan a stop")
+        # Extrema from samples: Trajectory.position_extrema is wrong for the velocity interface
+        # in the free edition (pantor/ruckig#215; its min comes out 0). Between samples h apart a
+        # joint can pass an extremum by at most ddq_max·h²/8, which is added as slack.
+        Q = self._samples(self._BRAKE_SAMPLE_S)[0]
+        slack = self.limits.ddq_max * self._BRAKE_SAMPLE_S**2 / 8.0
+        lo, hi = Q.min(axis=0) - slack, Q.max(axis=0) + slack
+        bad = (lo < self.q_lo_safe) | (hi > self.q_hi_safe)
+        if bad.any():
+            names = ", ".join(np.array(JOINT_NAMES)[bad])
+            return self.stop_step(q_meas, dq_meas, reason=f"braking check: joint range ({names})")
+        why = self._keepout_on_brake(sp.q, Q, np.maximum(np.abs(hi - sp.q), np.abs(lo - sp.q)))
+        if why:
+            return self.stop_step(q_meas, dq_meas, reason=f"braking check: {why}")
+        out = Setpoint(sp.q, sp.dq, sp.ddq, "; ".join(dict.fromkeys(reasons)))
+        self._last = out
+        return out
+
+    def _keepout_on_brake(self, q: np.ndarray, Q: np.ndarray, dq_travel: np.ndarray) -> str:
+        """Keep-out along the braking trajectory in self._traj. Sampled only when a point is
+        closer to a keep-out boundary than the most the stop could move it: joint j turning by
+        |dq_j| moves a point by at most |dq_j| times the length of the chain beyond joint j."""
+        bound = float(dq_travel @ self._chain_mm) + 1e-6
+        p = self.params
+        lo = np.array([p.workspace_min_mm[0], p.workspace_min_mm[1], max(p.z_min_mm, p.workspace_min_mm[2])])
+        hi = np.asarray(p.workspace_max_mm)
+        clearance = min(float(np.min(np.minimum(x - lo, hi - x))) for x in self.keepout_points(q).values())
+        if clearance > bound:
+            return ""
+        return self.keepout_violation(Q)
