@@ -17,8 +17,10 @@ from photoservo.vision.fitness import (
     IN_MATCH,
     OUTSIDE,
     StereoHue,
+    counts_compiled,
     counts_reference,
     fitness,
+    fitness_reference,
     project_model,
     stereo_hue,
 )
@@ -180,6 +182,47 @@ def test_config_validation_names_the_key():
         load_config(overrides=["fitness.combine=sum"])
 
 
+# ------------------------------------------------------------------------ compiled kernel
+
+
+@pytest.mark.parametrize("rig_name", ["ideal", "distorted"])
+@pytest.mark.parametrize("kernel", ["numba", "numba-parallel"])
+def test_kernel_equals_numpy_reference(rig_name, kernel):
+    rig = RIG if rig_name == "ideal" else distorted_rig()
+    p = dataclasses.replace(PARAMS, kernel=kernel, w_outside=0.3)
+    for seed, spread in [(10, 0.3), (11, 1.0), (12, 4.0)]:
+        R, t, alpha = population(40, seed, spread)
+        t[::7, 2] *= -1  # some behind the camera
+        np.testing.assert_array_equal(counts_compiled(R, t, alpha, MODEL, FRAME, rig, p),
+                                      counts_reference(R, t, alpha, MODEL, FRAME, rig, p))
+        for mode in ("mean", "min", "product"):
+            q = dataclasses.replace(p, combine=mode)
+            np.testing.assert_allclose(fitness(R, t, alpha, MODEL, FRAME, rig, q),
+                                       fitness_reference(R, t, alpha, MODEL, FRAME, rig, q), atol=1e-12)
+
+
+def test_kernel_reads_the_right_pixels():
+    """A hue image with a distinct code per pixel region: the kernel and the reference must
+    agree point by point, not only in total (a transposed index would not)."""
+    rng = np.random.default_rng(5)
+    hue = rng.integers(0, 180, FRAME.left.shape).astype(np.uint8)
+    hue[rng.random(hue.shape) < 0.2] = NO_HUE
+    frame = StereoHue(hue, np.ascontiguousarray(hue[::-1]))
+    R, t, alpha = population(25, seed=6, spread=2.0)
+    p = dataclasses.replace(PARAMS, kernel="numba")
+    np.testing.assert_array_equal(counts_compiled(R, t, alpha, MODEL, frame, RIG, p),
+                                  counts_reference(R, t, alpha, MODEL, frame, RIG, p))
+
+
+def test_bad_population_is_a_value_error():
+    with pytest.raises(ValueError, match="alpha <= 0"):
+        fitness(R_TRUE, T_TRUE, 0.0, MODEL, FRAME, RIG, PARAMS)
+    with pytest.raises(ValueError, match="non-finite"):
+        fitness(R_TRUE, T_TRUE * np.nan, 1.0, MODEL, FRAME, RIG, PARAMS)
+    with pytest.raises(ValueError, match="shapes"):
+        fitness(np.stack([R_TRUE] * 2), T_TRUE, [1.0, 1.0], MODEL, FRAME, RIG, PARAMS)
+
+
 # ------------------------------------------------------------------------ properties
 
 poses = st.tuples(
@@ -200,3 +243,15 @@ def test_fitness_bounded_by_one_and_by_the_costs(pose, combine, w_outside):
     f = fitness(R, t, np.exp(log_alpha), MODEL, FRAME, RIG, p)[0]
     worst = max(p.w_inner_mismatch, p.w_outer_mismatch, w_outside) * 1.0  # w_*_match are 1
     assert -worst - 1e-12 <= f <= 1.0 + 1e-12
+
+
+@settings(max_examples=40, deadline=None)
+@given(pose=poses)
+def test_kernel_equals_reference_anywhere(pose):
+    rvec, xy, z, log_alpha = pose
+    R = cv2.Rodrigues(np.array(rvec))[0][None]
+    t = np.array([[*xy, z]])
+    alpha = np.array([np.exp(log_alpha)])
+    rig = distorted_rig()
+    np.testing.assert_array_equal(counts_compiled(R, t, alpha, MODEL, FRAME, rig, PARAMS),
+                                  counts_reference(R, t, alpha, MODEL, FRAME, rig, PARAMS))

@@ -71,6 +71,7 @@ class FitnessParams:
     w_outer_mismatch: float  # cost per outer point on a target hue
     w_outside: float  # cost per point projected outside the image or behind the camera
     combine: Literal["mean", "min", "product"]  # how left and right scores combine
+    kernel: Literal["numba", "numba-parallel", "numpy"]  # compiled (1 thread / threads) or reference
 
     def validate(self, where: str) -> None:
         def key(n: str) -> str:
@@ -131,6 +132,9 @@ def _poses(R: np.ndarray, t: np.ndarray, alpha: np.ndarray) -> tuple[np.ndarray,
     if R.shape != (P, 3, 3) or t.shape != (P, 3) or alpha.shape != (P,):
         raise ValueError(f"population shapes must be R (P,3,3), t (P,3), alpha (P,); got "
                          f"{R.shape}, {t.shape}, {alpha.shape}")
+    if not (np.isfinite(R).all() and np.isfinite(t).all() and np.isfinite(alpha).all()
+            and (alpha > 0).all()):
+        raise ValueError("population has a non-finite pose or an alpha <= 0")
     return R, t, alpha
 
 
@@ -149,7 +153,8 @@ def project_model(R: np.ndarray, t: np.ndarray, alpha: np.ndarray, model: PhotoM
     for uv in (model.inner_uv, model.outer_uv):
         XL = _model_points_left(R, t, alpha, np.asarray(uv, dtype=np.float64).reshape(-1, 2))
         XR = XL @ rig.R.T + rig.T
-        out.append((project_points(XL, rig.left), project_points(XR, rig.right)))
+        with np.errstate(over="ignore", invalid="ignore"):  # far off-axis points: inf/NaN = outside
+            out.append((project_points(XL, rig.left), project_points(XR, rig.right)))
     (il, ir), (ol, orr) = out
     return ModelProjection(inner_left=il, outer_left=ol, inner_right=ir, outer_right=orr)
 
@@ -221,6 +226,38 @@ def fitness(R: np.ndarray, t: np.ndarray, alpha: np.ndarray, model: PhotoModel, 
 
     R: (P, 3, 3) rotations and t: (P, 3) mm, model in the left camera frame
     (X_left = R · X_model + t); alpha: (P,) px/mm. A single pose ((3,3), (3,), scalar) gives (1,).
-    1.0 is a perfect match in both cameras; 0 is "nothing seen".
+    1.0 is a perfect match in both cameras; 0 is "nothing seen". A non-finite pose or an
+    alpha <= 0 is a programming error (ValueError).
     """
-    return fitness_reference(R, t, alpha, model, frame, rig, params)
+    if params.kernel == "numpy":
+        return fitness_reference(R, t, alpha, model, frame, rig, params)
+    from photoservo.vision import fitness_kernel as fk
+
+    counts = counts_compiled(R, t, alpha, model, frame, rig, params)
+    w = np.array([params.w_inner_match, params.w_inner_mismatch, params.w_outer_match,
+                  params.w_outer_mismatch, params.w_outside])
+    mode = ("mean", "min", "product").index(params.combine)
+    return fk.combine(counts, len(model.inner_uv), len(model.outer_uv), w, mode)
+
+
+def counts_compiled(R: np.ndarray, t: np.ndarray, alpha: np.ndarray, model: PhotoModel,
+                    frame: StereoHue, rig: Rig, params: FitnessParams) -> np.ndarray:
+    """Per-individual, per-camera case counts (P, 2, N_COUNTS) by the numba kernel
+    (`fitness_kernel`); equal to `counts_reference`."""
+    from photoservo.vision import fitness_kernel as fk
+
+    R, t, alpha = _poses(R, t, alpha)
+    kernel = fk.counts_parallel if params.kernel == "numba-parallel" else fk.counts_serial
+    return kernel(
+        R, t, alpha, rig.R, rig.T,
+        fk.camera_vector(rig.left.K, rig.left.dist, rig.left.size),
+        fk.camera_vector(rig.right.K, rig.right.dist, rig.right.size),
+        _c(model.inner_uv, np.float64), _c(model.inner_hue, np.uint8),
+        _c(model.outer_uv, np.float64), _c(model.target_hues, np.bool_),
+        _c(frame.left, np.uint8), _c(frame.right, np.uint8),
+        params.hue_tolerance,
+    )
+
+
+def _c(a: np.ndarray, dtype: type) -> np.ndarray:
+    return np.ascontiguousarray(a, dtype=dtype)
