@@ -20,6 +20,7 @@ from photoservo.servo.control import ServoParams
 from photoservo.servo.motion import MotionParams
 from photoservo.vision.fitness import FitnessParams
 from photoservo.vision.photo_model import PhotoModelParams
+from photoservo.vision.synthetic import SynthParams
 
 
 @dataclass(frozen=True)
@@ -29,6 +30,7 @@ class Config:
     photo_model: PhotoModelParams
     fitness: FitnessParams
     servo: ServoParams
+    synthetic: SynthParams
     motion: MotionParams
 
 

@@ -179,8 +179,12 @@ def target_mask(photo_bgr: np.ndarray, params: PhotoModelParams,
             raise InputError(f"--roi {x},{y},{w},{h}: must lie inside the {W}x{H} photo and be at least 8x8 px")
         gc = np.zeros((H, W), np.uint8)
         bgd, fgd = np.zeros((1, 65), np.float64), np.zeros((1, 65), np.float64)
+        # a fixed faint dither: flat-colour images (clip art) would otherwise give GrabCut's
+        # colour GMMs zero-variance components that claim the whole rectangle
+        dither = np.random.default_rng(0).normal(0.0, 2.0, photo_bgr.shape)
+        img = np.clip(photo_bgr + dither, 0, 255).astype(np.uint8)
         cv2.setRNGSeed(0)  # GrabCut's GMM initialisation uses OpenCV's RNG: keep it reproducible
-        cv2.grabCut(photo_bgr, gc, (x, y, w, h), bgd, fgd, 5, cv2.GC_INIT_WITH_RECT)
+        cv2.grabCut(img, gc, (x, y, w, h), bgd, fgd, 5, cv2.GC_INIT_WITH_RECT)
         fg = (gc == cv2.GC_FGD) | (gc == cv2.GC_PR_FGD)
     else:
         bg_like = _background_like(photo_bgr, params)

@@ -1,0 +1,109 @@
+"""photoservo synth --specimen squid|--photo PHOTO [--other|--estimator-photo PHOTO2] [--seed N]
+                  [--distance MM] [--tilt-deg DEG] [--empty] [--distractor] [--effects LIST]
+                  [--rig RIG.toml] [--config CFG.toml] [--set key=value ...] --out DIR
+
+Renders a synthetic stereo scene (vision/synthetic.py): a creature lying on water seen by a rig
+whose rendering calibration differs from the written one by the [synthetic] calibration error.
+Writes DIR/left.png, DIR/right.png, DIR/rig.toml (the rig the estimator is told), DIR/truth.json
+(ground truth in the estimate-JSON shape, for the photo in DIR/photo.png) and DIR/photo.png
+(the photo the estimator should use), each atomically.
+
+    photoservo synth --specimen squid --seed 3 --distance 700 --out scene/
+    photoservo estimate --rig scene/rig.toml --photo scene/photo.png --left scene/left.png --right scene/right.png
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+from photoservo.errors import InputError
+from photoservo.fileio import read_image, write_image_atomic, write_text_atomic
+from photoservo.servo.cmd_config import add_config_options
+from photoservo.servo.config import load_config
+from photoservo.vision.photo_model import load_photo_model
+from photoservo.vision.rig import dump_rig, load_rig
+from photoservo.vision.specimens import SPECIES
+from photoservo.vision.synthetic import DEFAULT_EFFECTS, EFFECTS, random_scene
+
+
+def parse_effects(text: str) -> tuple[str, ...]:
+    """'waves,glints,noise' | 'all' | 'none' -> a tuple of EFFECTS names."""
+    t = text.strip().lower()
+    if t == "all":
+        return EFFECTS
+    if t in ("none", ""):
+        return ()
+    names = tuple(n.strip() for n in t.split(",") if n.strip())
+    for n in names:
+        if n not in EFFECTS:
+            raise InputError(f"--effects '{n}': unknown effect, choose from {', '.join(EFFECTS)}, all, none")
+    return names
+
+
+def truth_json(truth: dict) -> str:
+    """The truth object as JSON text, one key per line (values compact)."""
+    return "{\n" + ",\n".join(f" {json.dumps(k)}: {json.dumps(v)}" for k, v in truth.items()) + "\n}\n"
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    src = p.add_mutually_exclusive_group(required=True)
+    src.add_argument("--specimen", choices=SPECIES, help="a procedural creature the project draws")
+    src.add_argument("--photo", metavar="PHOTO", help="a photo of the creature to float on the water")
+    other = p.add_mutually_exclusive_group()
+    other.add_argument("--other", action="store_true",
+                       help="with --specimen: the estimator gets a photo of ANOTHER individual")
+    other.add_argument("--estimator-photo", metavar="PHOTO2",
+                       help="the photo the estimator gets (another individual of the same kind)")
+    p.add_argument("--seed", type=int, default=0, help="scene seed (default 0)")
+    p.add_argument("--distance", type=float, metavar="MM", help="target depth in the left camera (mm)")
+    p.add_argument("--tilt-deg", type=float, metavar="DEG", help="angle between target normal and optical axis")
+    p.add_argument("--empty", action="store_true", help="no creature: empty water (truth found=false)")
+    p.add_argument("--distractor", action="store_true", help="add a look-alike elsewhere in view")
+    p.add_argument("--effects", default=",".join(DEFAULT_EFFECTS), metavar="LIST",
+                   help=f"comma list of {', '.join(EFFECTS)}; or all / none (default: %(default)s)")
+    p.add_argument("--rig", metavar="RIG.toml", help="rig to render and write (default: the synthetic rig)")
+    add_config_options(p)
+    p.add_argument("--out", required=True, metavar="DIR", help="output folder")
+
+
+def run(args: argparse.Namespace) -> int:
+    cfg = load_config(args.config, args.overrides)
+    effects = parse_effects(args.effects)
+    if args.distance is not None and not 50 <= args.distance <= 100000:
+        raise InputError(f"--distance {args.distance}: must be within 50..100000 mm")
+    if args.tilt_deg is not None and not 0 <= args.tilt_deg <= 75:
+        raise InputError(f"--tilt-deg {args.tilt_deg}: must be within 0..75 degrees")
+    if args.other and args.photo:
+        raise InputError("--other: only with --specimen; give --estimator-photo PHOTO2 with --photo")
+    out = Path(args.out)
+    if out.exists() and not out.is_dir():
+        raise InputError(f"--out {out}: exists and is not a folder")
+    rig = load_rig(args.rig) if args.rig else None
+    photo = est = None
+    if args.photo:
+        load_photo_model(args.photo, cfg.photo_model)  # fail early, naming the file
+        photo = read_image(args.photo, "photo")
+    if args.estimator_photo:
+        load_photo_model(args.estimator_photo, cfg.photo_model)
+        est = read_image(args.estimator_photo, "photo")
+    sc = random_scene(args.seed, cfg.synthetic, cfg.photo_model, kind=args.specimen or "squid",
+                      other_photo=bool(args.other), effects=effects, empty=args.empty,
+                      distractor=args.distractor, distance_mm=args.distance, tilt_deg=args.tilt_deg,
+                      photo=photo, estimator_photo=est, rig=rig)
+    truth = dict(sc.truth)
+    truth["photo"] = "photo.png"
+    write_image_atomic(out / "left.png", sc.left)
+    write_image_atomic(out / "right.png", sc.right)
+    write_image_atomic(out / "photo.png", sc.photo)
+    write_text_atomic(out / "rig.toml", dump_rig(sc.rig))
+    write_text_atomic(out / "truth.json", truth_json(truth))
+    if truth["found"]:
+        x, y, z = truth["position_mm"]
+        print(f"wrote {out}/: left.png right.png rig.toml truth.json photo.png — target at "
+              f"({x:.0f}, {y:.0f}, {z:.0f}) mm, tilt {truth['tilt_deg']:.1f} deg, "
+              f"size {truth['size_mm'][0]:.0f} x {truth['size_mm'][1]:.0f} mm")
+    else:
+        print(f"wrote {out}/: left.png right.png rig.toml truth.json photo.png — no target (empty water)")
+    return 0
