@@ -16,6 +16,7 @@ from photoservo.errors import InputError
 # verb -> (module, one-line help). Add a verb here when its module lands.
 VERBS: dict[str, tuple[str, str]] = {
     "config": ("photoservo.servo.cmd_config", "print the effective configuration"),
+    "calibrate": ("photoservo.servo.cmd_calibrate", "calibrate the stereo rig, hand-eye transform and water plane"),
     "model": ("photoservo.servo.cmd_model", "build the photo-model of a photo and preview its sampling points"),
     "synth": ("photoservo.servo.cmd_synth", "render a synthetic stereo scene with ground truth"),
 }
