@@ -59,7 +59,7 @@ def test_verify_cli_is_shipped():
     assert rerun_cli().is_file(), "the rerun-sdk wheel should install a `rerun` executable"
 
 
-@pytest.mark.parametrize("mode", ["lossless", "raw"])
+@pytest.mark.parametrize("mode", ["lossless", "png"])
 def test_frames_and_static_setup_read_back_exactly(tmp_path: Path, mode: str):
     path = tmp_path / "run.rrd"
     model, rig = small_model(), default_rig()
@@ -312,11 +312,36 @@ def test_comparison_table_against_hand_computed_numbers(tmp_path: Path):
 
 
 def test_bad_inputs_are_one_line_errors(tmp_path: Path):
-    with pytest.raises(InputError, match="mode 'png'"):
-        Recorder.open(tmp_path / "x.rrd", "track", mode="png")
+    with pytest.raises(InputError, match="mode 'tiff'"):
+        Recorder.open(tmp_path / "x.rrd", "track", mode="tiff")
     with pytest.raises(InputError, match=r"\.rrd"):
         Recorder.open(tmp_path / "x.mp4", "track")
     with pytest.raises(InputError, match="recording not found"):
         read_recording(tmp_path / "missing.rrd")
     assert default_path("move", tmp_path).parent == tmp_path
     assert default_path("move").name.endswith("_move.rrd")
+
+
+def test_live_stream_to_a_grpc_server_still_writes_the_file(tmp_path: Path):
+    """`connect_url` tees to a running viewer; rerun's own gRPC server stands in for it (no
+    viewer on this machine). The file and its segments stay complete, and closing is prompt."""
+    import socket
+    import uuid
+
+    import rerun as rr
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    server = rr.RecordingStream("viewer-stand-in", recording_id=uuid.uuid4())
+    url = server.serve_grpc(grpc_port=port)
+    try:
+        t0 = time.monotonic()
+        with Recorder.open(tmp_path / "live.rrd", "track", connect_url=url, segment_s=0.1) as rec:
+            for k in range(8):
+                rec.log_frame(k, k / 30, *frame_pair(k))
+        assert time.monotonic() - t0 < 5.0
+    finally:
+        server.disconnect()
+    assert len(rec.files) == 3 and all(verify_rrd(f)[0] for f in rec.files)
+    frames = list(iter_frames(tmp_path / "live.rrd"))
+    assert [f.index for f in frames] == list(range(8))

@@ -26,7 +26,7 @@ Entity tree (mm, rad; `world` is the PA-10 base frame, z up)::
     world/arm/skeleton         LineStrips3D through the link origins
     world/rig                  Transform3D T_base_left (the left camera; per frame, when known)
     world/rig/left             Pinhole K, camera_xyz RDF (X right, Y down, Z forward) (static)
-    world/rig/left/image       the left frame (PNG / raw / JPEG, see modes)
+    world/rig/left/image       the left frame (raw / PNG / JPEG, see modes)
     world/rig/left/inner|outer Points2D: the best model's projected inner / outer points
     world/rig/right            Transform3D X_right = R X_left + T (static) + Pinhole
     world/rig/right/...        as left
@@ -53,12 +53,18 @@ second copy at `images/left` would double the file (see the benchmark for MB per
 Timelines: `frame` (sequence: the loop's frame index) and `time` (duration, seconds on the
 loop's monotonic clock). Arm, timing and event logs carry `time` only.
 
-Modes (chosen from `benchmarks/recording.py`, 640x480 stereo at 30 fps):
-  lossless  PNG (zlib level 1, Huffman-only, SUB filter): bit-exact, replayable. Encoded on a
-            worker thread (cv2 releases the GIL), so the loop pays only a copy.
-  raw       uncompressed rr.Image: bit-exact, replayable, cheapest CPU, ~3.3 GB per minute.
-  preview   JPEG q90: ~10x smaller but LOSSY — hue changes, so replay refuses it; said in
-            `setup/WARNING`, in `setup/run` ("replayable": false), as an event and as a warning.
+Modes (chosen from `benchmarks/recording.py`, 640x480 stereo at 30 fps, on this 2-core
+machine while loaded: CPU ms per stereo frame, whole process / MB per minute, clean synthetic
+frames .. with 2.5 DN sensor noise):
+  lossless  (default) the pixels as an rr.Image, compressed by rerun's own LZ4 chunk
+            compression in its writer thread: bit-exact, replayable; ~8-13 ms CPU per frame,
+            1650..3300 MB/min. The only lossless encoding that keeps up with 30 fps here.
+  png       PNG (zlib level 1, Huffman-only, SUB filter) on a worker thread (cv2 releases the
+            GIL): bit-exact, replayable, 1200..1800 MB/min (~30% less) but ~32-38 ms CPU per
+            frame — a whole core at 30 fps, so for slow loops or offline re-recording.
+  preview   JPEG q90 on the worker thread: 160..200 MB/min, ~5 ms, but LOSSY — hue changes, so
+            replay refuses it; said in `setup/WARNING`, in `setup/run` ("replayable": false),
+            as an event and as a Python warning. For long sessions that are only watched.
 
 Nothing lost: `close()` (also from `__exit__` and on Ctrl-C/exceptions) drains the encoder,
 flushes and disconnects, which writes the RRD footer (`rerun rrd verify` accepts the file).
@@ -106,11 +112,11 @@ log = logging.getLogger(__name__)
 
 APPLICATION_ID = "photoservo"
 FORMAT_VERSION = 1
-Mode = Literal["lossless", "raw", "preview"]
-MODES: tuple[str, ...] = ("lossless", "raw", "preview")
+Mode = Literal["lossless", "png", "preview"]
+MODES: tuple[str, ...] = ("lossless", "png", "preview")
 
-#: PNG parameters of the lossless mode: level 1 + Huffman-only + SUB filter encodes a 640x480
-#: frame in ~12 ms (vs ~25 ms at the default filter) for a similar size on camera-like frames.
+#: PNG parameters of the png mode: level 1 + Huffman-only + SUB filter was the cheapest of the
+#: zlib settings tried (about half the CPU of the default filters at ~5% larger files).
 PNG_PARAMS = [cv2.IMWRITE_PNG_COMPRESSION, 1,
               cv2.IMWRITE_PNG_STRATEGY, cv2.IMWRITE_PNG_STRATEGY_HUFFMAN_ONLY,
               cv2.IMWRITE_PNG_FILTER, cv2.IMWRITE_PNG_FILTER_SUB]
@@ -134,7 +140,7 @@ E_EVENTS = "events"
 class RecordingParams:
     """[recording] config: how sessions are recorded."""
 
-    mode: Literal["lossless", "raw", "preview"]  # frame encoding, see the module docstring
+    mode: Literal["lossless", "png", "preview"]  # frame encoding, see the module docstring
     segment_s: float  # length of one segment file (s); 0 = one file (no hard-kill protection)
     dir: str  # folder for default recording paths (logs/<timestamp>_<verb>.rrd)
 
@@ -213,9 +219,9 @@ def encode_frame(bgr: np.ndarray, mode: str) -> Any:
     """One camera frame (H, W, 3) uint8 BGR as the rerun archetype of `mode`."""
     if bgr.dtype != np.uint8 or bgr.ndim != 3 or bgr.shape[2] != 3:
         raise ValueError(f"frames must be (H, W, 3) uint8 BGR, got {bgr.shape} {bgr.dtype}")
-    if mode == "raw":
+    if mode == "lossless":
         return rr.Image(bgr, color_model="BGR")
-    ext, params, media = ((".png", PNG_PARAMS, "image/png") if mode == "lossless"
+    ext, params, media = ((".png", PNG_PARAMS, "image/png") if mode == "png"
                           else (".jpg", [cv2.IMWRITE_JPEG_QUALITY, JPEG_QUALITY], "image/jpeg"))
     ok, buf = cv2.imencode(ext, bgr, params)
     if not ok:
@@ -299,7 +305,7 @@ class Recorder:
             warnings.warn(f"{self.path}: {PREVIEW_WARNING}", stacklevel=3)
             self._log_static(E_WARNING, rr.TextDocument(PREVIEW_WARNING))
             self.event(0.0, PREVIEW_WARNING, level="WARN")
-        if encode_threads > 0 and mode != "raw":
+        if encode_threads > 0 and mode != "lossless":   # rr.Image copies at once: no thread
             self._queue = queue.Queue(maxsize=4 * encode_threads)
             for i in range(encode_threads):
                 w = threading.Thread(target=self._encode_worker, name=f"recorder-encode-{i}",
@@ -317,10 +323,10 @@ class Recorder:
 
         path: the `.rrd` to write; None -> `default_path(verb, logs_dir)`. With `segment_s > 0`
             the files are `segment_path(path, 1..)` instead of `path` itself (module doc).
-        mode: 'lossless' (PNG), 'raw' or 'preview' (JPEG, not replayable).
+        mode: 'lossless' (raw pixels + rerun's LZ4), 'png' or 'preview' (JPEG, not replayable).
         view: spawn a viewer and stream to it while writing the file (returns at once).
         connect_url: stream to a running viewer (`rerun+http://host:9876/proxy`) as well.
-        encode_threads: worker threads that encode frames (0: encode in the caller).
+        encode_threads: worker threads that encode png/preview frames (0: in the caller).
         """
         p = Path(path) if path is not None else default_path(verb, logs_dir)
         if p.suffix != ".rrd":
@@ -469,7 +475,7 @@ class Recorder:
                 "versions": dict(versions or software_versions()),
                 "recording_id": self.recording_id, "segment_s": self.segment_s,
                 "started_utc": datetime.now(UTC).isoformat(timespec="seconds"),
-                "png_params": PNG_PARAMS if self.mode == "lossless" else None}
+                "png_params": PNG_PARAMS if self.mode == "png" else None}
 
     # --- static setup ---------------------------------------------------------------------
 

@@ -1,0 +1,131 @@
+"""Recording cost per encoding (issue 6 item 7): 640x480 stereo at 30 fps.
+
+For each frame encoding of `servo.recording` (lossless = raw pixels + rerun's LZ4, png,
+preview JPEG) and two kinds of
+frames (the synthetic renderer's water scene as rendered, and the same with 2.5 DN sensor noise
+like a real camera), it records N stereo frames through `Recorder` and reports:
+
+  loop ms/frame    median time the calling loop spends in `log_frame` (png/preview encode on
+                   a worker thread: a copy + queue hand-off, unless the queue is full because
+                   the encoder cannot keep up — then the loop waits)
+  total ms/frame   wall time from the first frame to the file closed, per frame (the CPU the
+                   recording really costs, whichever thread pays it)
+  cpu ms/frame     CPU time of the whole process (every thread, rerun's own compression and
+                   writing included) per frame: the honest cost on a loaded machine
+  encode ms/frame  time spent encoding one stereo frame (both images)
+  MB/min           file size per minute of 30 fps stereo
+  read fps         `replay_io.iter_frames` read-back speed (stereo frames/s, decoded)
+  exact            frames read back bit-equal to those logged
+
+Prints a table and writes benchmarks/out/recording.json (median of `--repeats` runs).
+Run: /work/venv/bin/python benchmarks/recording.py [--frames 150] [--repeats 3]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import statistics
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+from photoservo.fileio import write_text_atomic
+from photoservo.servo.config import load_config
+from photoservo.servo.recording import MODES, Recorder
+from photoservo.servo.replay_io import iter_frames
+from photoservo.vision.photo_model import build_photo_model
+from photoservo.vision.specimens import specimen
+from photoservo.vision.synthetic import (
+    CameraEffects,
+    Scene,
+    calm_water,
+    floater_from_model,
+    lying_on_water,
+    render_stereo,
+    synthetic_rig,
+)
+
+FPS = 30.0
+DISTINCT = 8  # distinct rendered stereo frames, cycled (rendering is slower than recording)
+
+
+def render_frames(noise_sigma: float) -> list[tuple[np.ndarray, np.ndarray]]:
+    """Stereo frames of a squid on moving water seen from 600 mm above, camera looking down."""
+    photo = specimen("squid", 0)
+    model = build_photo_model(photo, load_config().photo_model)
+    rig = synthetic_rig()
+    scene = Scene(water=calm_water(3), target=floater_from_model(
+        photo, model, model.size_px[0] / 180.0, lying_on_water(np.zeros(3), 0.4)))
+    fx = CameraEffects(noise_sigma=noise_sigma)
+    rng = np.random.default_rng(0)
+    out = []
+    for k in range(DISTINCT):
+        T = np.eye(4)
+        T[:3, :3] = np.diag([1.0, -1.0, -1.0])
+        T[:3, 3] = (50.0 + 3 * k, -20.0, 600.0)
+        out.append(render_stereo(scene, rig, T, t=k / FPS, rng=rng, effects=(fx, fx)))
+    return out
+
+
+def run_once(frames: list, mode: str, n: int, folder: Path) -> dict:
+    path = folder / f"bench_{mode}.rrd"
+    loop = []
+    c0, t0 = time.process_time(), time.perf_counter()
+    with Recorder.open(path, "bench", mode=mode) as rec:
+        for k in range(n):
+            left, right = frames[k % len(frames)]
+            t1 = time.perf_counter()
+            rec.log_frame(k, k / FPS, left, right)
+            loop.append(time.perf_counter() - t1)
+    total, cpu = time.perf_counter() - t0, time.process_time() - c0
+    size = path.stat().st_size
+    t2 = time.perf_counter()
+    exact, count = True, 0
+    for f in iter_frames(path):
+        left, right = frames[f.index % len(frames)]
+        exact &= bool(np.array_equal(f.left, left) and np.array_equal(f.right, right))
+        count += 1
+    read = time.perf_counter() - t2
+    path.unlink()
+    return {"loop_ms": 1e3 * statistics.median(loop), "total_ms": 1e3 * total / n,
+            "cpu_ms": 1e3 * cpu / n,
+            "encode_ms": 1e3 * rec.encode_s / n, "mb_per_min": size / 1e6 / (n / FPS) * 60,
+            "read_fps": count / read, "exact": exact and count == n}
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--frames", type=int, default=150)
+    ap.add_argument("--repeats", type=int, default=3)
+    args = ap.parse_args()
+    results = []
+    with tempfile.TemporaryDirectory() as tmp:
+        for scene, sigma in (("synthetic", 0.0), ("synthetic+noise2.5", 2.5)):
+            frames = render_frames(sigma)
+            for mode in MODES:
+                runs = [run_once(frames, mode, args.frames, Path(tmp)) for _ in range(args.repeats)]
+                row = {"scene": scene, "mode": mode,
+                       **{k: statistics.median(r[k] for r in runs) for k in runs[0] if k != "exact"},
+                       "exact": all(r["exact"] for r in runs)}
+                results.append(row)
+    head = f"{'frames':20s} {'mode':9s} {'loop ms':>8s} {'total ms':>9s} {'cpu ms':>7s} {'enc ms':>7s} {'MB/min':>8s} {'read fps':>9s} exact"
+    print(f"Recording 640x480 stereo @ {FPS:.0f} fps, {args.frames} frames x {args.repeats} runs (median); "
+          f"{os.cpu_count()} CPUs, machine shared with other engineers (loaded)")
+    print(head)
+    for r in results:
+        print(f"{r['scene']:20s} {r['mode']:9s} {r['loop_ms']:8.2f} {r['total_ms']:9.2f} {r['cpu_ms']:7.2f} {r['encode_ms']:7.2f} "
+              f"{r['mb_per_min']:8.0f} {r['read_fps']:9.1f} {'yes' if r['exact'] else 'NO'}")
+    out = Path(__file__).parent / "out" / "recording.json"
+    write_text_atomic(out, json.dumps({"fps": FPS, "size": [640, 480], "frames": args.frames,
+                                       "repeats": args.repeats, "load_note": "shared 2-core machine, loaded",
+                                       "results": results}, indent=1) + "\n")
+    print(f"wrote {out}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
