@@ -19,6 +19,7 @@ VERBS: dict[str, tuple[str, str]] = {
     "calibrate": ("photoservo.servo.cmd_calibrate", "calibrate the stereo rig, hand-eye transform and water plane"),
     "model": ("photoservo.servo.cmd_model", "build the photo-model of a photo and preview its sampling points"),
     "synth": ("photoservo.servo.cmd_synth", "render a synthetic stereo scene with ground truth"),
+    "scan": ("photoservo.servo.cmd_scan", "fitness maps (pose axis x alpha) around a given pose, as heatmap PNGs"),
 }
 
 
