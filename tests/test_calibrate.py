@@ -58,15 +58,25 @@ def test_renderer_agrees_with_project_points(rig, board):
     assert err.mean() < 0.25 and err.max() < 1.0
 
 
-def check_rig(cal, rig):
-    """Tolerances: focal lengths within 1 %, principal point within 4 px, baseline within 1 %,
-    stereo rotation within 0.3 deg, T direction within 1 deg."""
+# Tolerances per board kind (10 views, 480x360 px, 2 grey levels of noise): the chessboard's
+# corners are all found and refined to ~0.1 px; at this small image size the ChArUco markers are
+# ~15 px wide and only 30-45 of the 54 corners are found per view, so it is held to looser ones.
+TOLERANCE = {  # focal (relative), principal point (px), baseline (relative), rotation (deg)
+    CHESS: (0.004, 3.0, 0.003, 0.1),
+    CHARUCO: (0.01, 4.0, 0.006, 0.3),
+}
+
+
+def check_rig(cal, rig, board):
+    """Focal lengths, principal points, baseline and stereo rotation against the truth
+    (TOLERANCE); the direction of T within 1 deg."""
+    f_tol, c_tol, b_tol, r_tol = TOLERANCE[board]
     for est, true in ((cal.rig.left, rig.left), (cal.rig.right, rig.right)):
-        assert est.K[0, 0] == pytest.approx(true.K[0, 0], rel=0.01)
-        assert est.K[1, 1] == pytest.approx(true.K[1, 1], rel=0.01)
-        assert np.hypot(*(est.K[:2, 2] - true.K[:2, 2])) < 4.0
-    assert cal.rig.baseline_mm == pytest.approx(rig.baseline_mm, rel=0.01)
-    assert rotation_angle_deg(cal.rig.R.T @ rig.R) < 0.3
+        assert est.K[0, 0] == pytest.approx(true.K[0, 0], rel=f_tol)
+        assert est.K[1, 1] == pytest.approx(true.K[1, 1], rel=f_tol)
+        assert np.hypot(*(est.K[:2, 2] - true.K[:2, 2])) < c_tol
+    assert cal.rig.baseline_mm == pytest.approx(rig.baseline_mm, rel=b_tol)
+    assert rotation_angle_deg(cal.rig.R.T @ rig.R) < r_tol
     cos = cal.rig.T @ rig.T / (np.linalg.norm(cal.rig.T) * np.linalg.norm(rig.T))
     assert math.degrees(math.acos(min(1.0, cos))) < 1.0
 
@@ -83,7 +93,7 @@ def test_stereo_calibration_recovers_rig_from_noisy_views(rig, board, noisy_sets
     views, skipped = pair_detections([f"{k:02d}" for k in range(10)], *noisy_sets[board], board)
     assert skipped == [] and len(views) == 10
     cal = calibrate_stereo(views, board, SIZE, SIZE)
-    check_rig(cal, rig)
+    check_rig(cal, rig, board)
     assert cal.rms_px < 0.35 and cal.outliers == ()
     # The calibrated rig measures: a held-out view's corners, triangulated, keep the board's
     # true size within 0.5 % and its depth within 1 %.
