@@ -345,3 +345,52 @@ def test_live_stream_to_a_grpc_server_still_writes_the_file(tmp_path: Path):
     assert len(rec.files) == 3 and all(verify_rrd(f)[0] for f in rec.files)
     frames = list(iter_frames(tmp_path / "live.rrd"))
     assert [f.index for f in frames] == list(range(8))
+
+
+def test_arm_samples_from_a_control_thread_are_all_written(tmp_path: Path):
+    """`move` logs only the arm, at the control rate, from its own thread: every sample lands,
+    in order, with the arm drawn and the flange path written."""
+    import threading
+
+    from rerun.chunk import RrdReader
+    path = tmp_path / "move.rrd"
+    n = 600                                                  # > ARM_BATCH: flushed mid-run too
+    with Recorder.open(path, "move") as rec:
+        def control() -> None:
+            for i in range(n):
+                rec.log_arm(i * 0.002, np.full(7, i * 1e-3), np.full(7, i * 2e-3), np.full(7, i * 3e-3))
+        th = threading.Thread(target=control)
+        th.start()
+        th.join()
+    assert verify_rrd(path)[0]
+    r = read_recording(path)
+    assert np.allclose(r.arm["q"].t, np.arange(n) * 0.002)
+    assert np.allclose(r.arm["setpoint"].values[:, 3], np.arange(n) * 2e-3)
+    assert r.arm["command"].values.shape == (n, 7)
+    entities = {c.entity_path for c in RrdReader(path).stream()}
+    assert {"/world/arm/link7", "/world/arm/skeleton", "/world/flange/path"} <= entities
+
+
+def test_projected_points_and_desired_pose_are_drawn(tmp_path: Path):
+    from rerun.chunk import RrdReader
+
+    from photoservo.vision.fitness import project_model
+    model, rig = small_model(), default_rig()
+    R, p, alpha = np.eye(3), np.array([0.0, 0.0, 400.0]), 4.0
+    proj = project_model(R, p, alpha, model, rig)
+    path = tmp_path / "drawn.rrd"
+    with Recorder.open(path, "track") as rec:
+        rec.log_static_setup(dump_rig(rig), frame_pair(0)[0], model, CONFIG_TOML, seed=1)
+        rec.log_frame(0, 0.0, *frame_pair(0))
+        rec.log_estimate(0, 0.0, found=True, fitness=0.7, R=R, position_mm=p, alpha=alpha,
+                         size_mm=model.size_mm(alpha), projection=proj)
+        rec.log_desired(0.0, np.eye(4), frame=0)
+    assert verify_rrd(path)[0]
+    pts = {}
+    for c in RrdReader(path).stream():
+        rb = c.to_record_batch()
+        if "Points2D:positions" in rb.schema.names and not c.is_static:
+            pts[c.entity_path] = np.array(rb.column("Points2D:positions")[0].values.to_pylist())
+    assert set(pts) == {f"/world/rig/{s}/{k}" for s in ("left", "right") for k in ("inner", "outer")}
+    assert np.allclose(pts["/world/rig/left/inner"], proj.inner_left[0], atol=1e-3)   # float32
+    assert len(pts["/world/rig/right/outer"]) == len(model.outer_uv)

@@ -123,6 +123,7 @@ PNG_PARAMS = [cv2.IMWRITE_PNG_COMPRESSION, 1,
 JPEG_QUALITY = 90
 PATH_S = 10.0          # seconds of flange path kept in `world/flange/path`
 PATH_PERIOD_S = 0.5    # how often the path strip is re-logged
+ARM_BATCH = 250        # queued arm samples written at once when no frames come (0.5 s at 500 Hz)
 JOINT_NAMES = ("S1", "S2", "S3", "E1", "E2", "W1", "W2")
 PREVIEW_WARNING = ("PREVIEW RECORDING: frames are JPEG (lossy, hue changes). This recording "
                    "is for viewing only and CANNOT be replayed.")
@@ -286,6 +287,7 @@ class Recorder:
         self._seg_t0: float | None = None
         self._path_pts: deque[tuple[float, np.ndarray]] = deque()
         self._path_last_t = -math.inf
+        self._arm_pending: deque[tuple] = deque()   # log_arm samples not yet written
         self._closed = False
         self._error: BaseException | None = None
         self.frames_logged = 0
@@ -364,7 +366,10 @@ class Recorder:
                     w.join()
         finally:
             with self._lock:
-                self._finish_file()
+                try:
+                    self._flush_arm()
+                finally:
+                    self._finish_file()
         if self._error is not None:
             raise RuntimeError(f"recording to {self.path} failed: {self._error}") from self._error
 
@@ -420,6 +425,7 @@ class Recorder:
             return
         if self._queue is not None:
             self._queue.join()   # this segment's frames land in this segment
+        self._flush_arm()
         with self._lock:
             self._finish_file()
             self._open_file(self._next_file())
@@ -528,6 +534,7 @@ class Recorder:
         self._check()
         self._maybe_rotate(t)
         self._last_t = t
+        self._flush_arm()
         extra = {}
         if capture_times is not None:
             extra["t_left"], extra["t_right"] = float(capture_times[0]), float(capture_times[1])
@@ -616,19 +623,41 @@ class Recorder:
     def log_arm(self, t: float, q: np.ndarray, setpoint: np.ndarray | None = None,
                 command: np.ndarray | None = None) -> None:
         """Joint state q (rad), the motion setpoint and the command sent (rad), at time t.
-        Draws the arm from forward kinematics and extends the flange path."""
+
+        Cheap enough for the control thread: the sample is only queued (a deque append, no
+        rerun call, no lock). Queued samples are written as columns (one chunk per series) at
+        the next `log_frame`, every `ARM_BATCH` samples when no frames come (the `move` verb),
+        before a new segment and at close; the arm is drawn (forward kinematics of the last q)
+        and the flange path extended at the same time."""
         self._check()
+        self._arm_pending.append((float(t), np.array(q, dtype=np.float64),
+                                  None if setpoint is None else np.array(setpoint, dtype=np.float64),
+                                  None if command is None else np.array(command, dtype=np.float64)))
+        if len(self._arm_pending) >= ARM_BATCH:
+            self._flush_arm()
+
+    def _flush_arm(self) -> None:
+        """Write the queued arm samples (see `log_arm`)."""
+        rows = []
+        while True:
+            try:
+                rows.append(self._arm_pending.popleft())
+            except IndexError:
+                break
+        if not rows:
+            return
         from photoservo.robot.pa10 import fk_frames
-        q = np.asarray(q, dtype=np.float64)
-        self._log("arm/q", t, None, rr.Scalars(q))
-        if setpoint is not None:
-            self._log("arm/setpoint", t, None, rr.Scalars(np.asarray(setpoint, dtype=np.float64)))
-        if command is not None:
-            self._log("arm/command", t, None, rr.Scalars(np.asarray(command, dtype=np.float64)))
-        frames = fk_frames(q)
+        ts = np.array([r[0] for r in rows])
         with self._lock:
+            for k, name in ((1, "arm/q"), (2, "arm/setpoint"), (3, "arm/command")):
+                sel = [i for i, r in enumerate(rows) if r[k] is not None]
+                if sel:
+                    self._rec.send_columns(name, indexes=[rr.TimeColumn("time", duration=ts[sel])],
+                                           columns=rr.Scalars.columns(scalars=np.array([rows[i][k] for i in sel])))
+            t = float(ts[-1])
+            frames = fk_frames(rows[-1][1])
             self._rec.reset_time()
-            self._rec.set_time("time", duration=float(t))
+            self._rec.set_time("time", duration=t)
             for i, T in enumerate(frames):
                 self._rec.log(f"world/arm/link{i}", _transform(T), rr.TransformAxes3D(axis_length=40.0))
             self._rec.log("world/arm/skeleton", rr.LineStrips3D([frames[:, :3, 3]], radii=8.0,
