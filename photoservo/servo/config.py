@@ -15,6 +15,8 @@ from pathlib import Path
 from typing import Any, Sequence
 
 from photoservo.errors import InputError
+from photoservo.robot.emulator import EmulatorParams
+from photoservo.robot.link import LinkParams
 from photoservo.tomlconf import build_dataclass, configs_dir, read_toml
 from photoservo.servo.control import ServoParams
 from photoservo.servo.motion import MotionParams
@@ -31,6 +33,8 @@ class Config:
     fitness: FitnessParams
     servo: ServoParams
     synthetic: SynthParams
+    link: LinkParams
+    emulator: EmulatorParams
     motion: MotionParams
 
 

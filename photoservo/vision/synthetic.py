@@ -573,7 +573,7 @@ def _camera_pose(rng: np.random.Generator, rig: Rig, corners_model: np.ndarray, 
 
 
 def _buoy_photo(hue: int, rng: np.random.Generator) -> np.ndarray:
-    """A 'red buoy' look-alike: a shaded disc in the target's hue with a white band, on white."""
+    """A 'buoy' look-alike: a shaded disc in the target's hue with a dark band, on white."""
     img = np.full((160, 160, 3), 240, np.uint8)
     hsv = np.uint8([[[hue, 200, 210]]])
     col = cv2.cvtColor(hsv, cv2.COLOR_HSV2BGR)[0, 0].astype(float)
@@ -583,7 +583,7 @@ def _buoy_photo(hue: int, rng: np.random.Generator) -> np.ndarray:
     shade = np.clip(1.1 - 0.5 * np.hypot(xx - 60, yy - 60) / 80, 0.5, 1.2)
     img[disc] = np.clip(col[None] * shade[disc][:, None], 0, 255).astype(np.uint8)
     band = disc & (np.abs(xx - 80 - 10 * rng.uniform(-1, 1)) < 9)
-    img[band] = 235
+    img[band] = 60  # a dark band (a white one would join the backdrop and halve the buoy)
     return img
 
 

@@ -1,0 +1,454 @@
+"""Host side of the serial bridge (issue 3 item 4): a pyserial client for the wire protocol.
+
+    with Link("/dev/ttyUSB0", params) as link:        # or any pyserial URL, or a pty path
+        link.enable()
+        s = link.state()                              # latest StateReport + receive time
+        link.send_setpoint(q, dq)                     # never blocks the control loop
+        past = link.state_at(t_capture)               # joints where the cameras were then
+        link.stop(); link.disable()
+
+A background reader thread decodes every byte the bridge sends and keeps the recent states;
+setpoints are written with a non-blocking write (a setpoint that finds the line still busy is
+dropped and counted — the next one supersedes it). Control messages (enable, stop, tool...) wait
+for their ACK. A bridge that goes silent (no state for `silence_timeout_s`) or away (the port
+errors or closes) makes the next call raise `LinkError` saying what to check. Leaving the `with`
+block stops the arm (controlled stop) and disables the servo if it was on; there is no __del__.
+
+Times are `time.monotonic()` seconds on the host; joints in radians.
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from collections import deque
+from dataclasses import dataclass
+from typing import Self
+
+import numpy as np
+import serial
+
+from photoservo.errors import InputError
+from photoservo.robot import protocol as P
+
+
+class LinkError(ConnectionError):
+    """The bridge refused a command, went silent, or went away. The message says what to do."""
+
+
+@dataclass(frozen=True)
+class LinkParams:
+    """[link] section of configs/default.toml."""
+
+    baud: int
+    silence_timeout_s: float
+    ack_timeout_s: float
+    history_s: float
+
+    def validate(self, where: str) -> None:
+        w = f"{where}." if where else ""
+        if self.baud <= 0:
+            raise InputError(f"config key '{w}baud': {self.baud} must be > 0")
+        for k in ("silence_timeout_s", "ack_timeout_s", "history_s"):
+            if getattr(self, k) <= 0:
+                raise InputError(f"config key '{w}{k}': {getattr(self, k)} must be > 0")
+
+
+@dataclass(frozen=True)
+class JointState:
+    """A state report as the host knows it.
+
+    t: bridge measurement time on the host clock (s): t_bridge mapped by the smallest observed
+       receive delay (see `Link._clock_offset`), so line and thread-wakeup jitter drop out.
+    t_rx: host monotonic time the report was decoded (s).
+    q, dq: joint positions (rad) and velocities (rad/s).
+    """
+
+    t: float
+    t_rx: float
+    q: np.ndarray
+    dq: np.ndarray
+    status: P.Status
+    fault: P.Fault
+    report: P.StateReport
+
+    @property
+    def servo_on(self) -> bool:
+        return bool(self.status & P.Status.SERVO_ON)
+
+    @property
+    def moving(self) -> bool:
+        return bool(self.status & P.Status.MOVING)
+
+
+def _describe_nack(n: P.Nack, names: tuple[str, ...] | None = None) -> str:
+    try:
+        err = P.Error(n.error).name
+    except ValueError:
+        err = f"error {n.error}"
+    try:
+        what = P.MsgType(n.msg_type).name
+    except ValueError:
+        what = f"type 0x{n.msg_type:02x}"
+    where = ""
+    if n.joint != 255:
+        name = names[n.joint] if names and n.joint < len(names) else f"joint {n.joint + 1}"
+        where = f" at {name} (value {n.value:.4g})"
+    return f"bridge refused {what}: {err}{where}"
+
+
+class Link:
+    """Serial client of the bridge. See the module docstring for the life cycle.
+
+    Args:
+        port: device path (/dev/ttyUSB0, /dev/pts/N) or pyserial URL (socket://, rfc2217://...).
+        params: LinkParams (baud for real ports; timeouts; how much state history to keep).
+        joint_names: for error messages (default J1..J7).
+    """
+
+    def __init__(self, port: str, params: LinkParams, joint_names: tuple[str, ...] | None = None) -> None:
+        self.port = port
+        self.params = params
+        self.joint_names = joint_names or tuple(f"J{i + 1}" for i in range(P.N_JOINTS))
+        self.decoder = P.Decoder()
+        self.version: P.VersionInfo | None = None
+        self.setpoints_sent = 0
+        self.setpoints_dropped = 0
+        self.nacks: deque[P.Nack] = deque(maxlen=64)
+        self._ser: serial.SerialBase | None = None
+        self._seq = 0
+        self._tx_lock = threading.Lock()
+        self._tx_pending = b""
+        self._cond = threading.Condition()
+        self._replies: dict[int, P.Message] = {}
+        self._history: deque[JointState] = deque()
+        self._offsets: deque[float] = deque(maxlen=512)
+        self._error: LinkError | None = None
+        self._closing = threading.Event()
+        self._reader: threading.Thread | None = None
+        self._t_open = 0.0
+        self._servo_requested = False
+
+    # ------------------------------------------------------------------ life cycle
+    def open(self) -> P.VersionInfo:
+        """Open the port, start the reader, say HELLO; return the bridge's VERSION answer.
+
+        Raises:
+            LinkError: the port cannot be opened, or no VERSION came within ack_timeout_s.
+        """
+        self._closing.clear()
+        with self._cond:
+            self._error = None
+            self._history.clear()
+            self._replies.clear()
+            self._offsets.clear()
+        try:
+            self._ser = serial.serial_for_url(self.port, baudrate=self.params.baud, timeout=0.02,
+                                              write_timeout=0)
+        except (serial.SerialException, OSError, ValueError) as e:
+            raise LinkError(f"cannot open {self.port}: {e}. Is the bridge (or `photoservo pa10-sim`) "
+                            "running and is this its port?") from None
+        try:
+            self._ser.reset_input_buffer()
+        except (serial.SerialException, OSError):
+            pass
+        self._t_open = time.monotonic()
+        self._reader = threading.Thread(target=self._read_loop, name="pa10-link-reader", daemon=True)
+        self._reader.start()
+        try:
+            reply = self._request(P.Hello(client_id=0x5053), expect=P.VersionInfo)
+        except LinkError:
+            self.close()
+            raise
+        assert isinstance(reply, P.VersionInfo)
+        self.version = reply
+        return reply
+
+    def close(self) -> None:
+        """Stop the reader and close the port. Does not talk to the bridge (see __exit__)."""
+        self._closing.set()
+        if self._reader is not None and self._reader is not threading.current_thread():
+            self._reader.join(timeout=1.0)
+        if self._ser is not None:
+            try:
+                self._ser.close()
+            except (serial.SerialException, OSError):
+                pass
+        self._ser = None
+
+    def __enter__(self) -> Self:
+        if self.version is None or self._ser is None:
+            self.open()
+        return self
+
+    def __exit__(self, exc_type, exc, tb) -> None:
+        try:
+            if self._servo_requested and self._error is None:
+                try:
+                    self.stop()
+                    self.wait_until_still(timeout=5.0)
+                finally:
+                    self.disable()
+        except LinkError:
+            if exc_type is None:
+                raise
+        finally:
+            self.close()
+
+    # ------------------------------------------------------------------ commands
+    def enable(self) -> None:
+        """Servo on (brakes released, holding the measured position). Raises LinkError on NACK."""
+        self._request(P.Servo(True))
+        self._servo_requested = True
+
+    def disable(self) -> None:
+        """Servo off: the bridge stops any motion within the limits, then engages the brakes."""
+        self._request(P.Servo(False))
+        self._servo_requested = False
+
+    def stop(self) -> None:
+        """Controlled stop: the bridge drops the setpoint stream and decelerates to rest."""
+        self._request(P.Stop())
+
+    def estop(self) -> None:
+        """Emergency stop: brakes at once, fault latched until clear_fault()."""
+        self._request(P.EStop())
+        self._servo_requested = False
+
+    def clear_fault(self) -> None:
+        self._request(P.ClearFault())
+
+    def tool(self, on: bool, output: int = 0) -> None:
+        """Switch a tool output (0 = the collection net / gripper)."""
+        self._request(P.Tool(output, on))
+
+    def send_setpoint(self, q, dq, t_host: float | None = None) -> int | None:
+        """Send one joint setpoint (rad, rad/s) stamped `t_host` (default now). Never blocks:
+        returns its sequence number, or None when the line was still busy with earlier bytes
+        (the setpoint is dropped and counted in `setpoints_dropped`).
+
+        Raises:
+            LinkError: the bridge has gone silent or away.
+        """
+        self._check()
+        t = time.monotonic() if t_host is None else t_host
+        msg = P.JointSetpoint(int(t * 1e6), tuple(np.asarray(q, float).tolist()),
+                              tuple(np.asarray(dq, float).tolist()))
+        seq = self._write(msg, droppable=True)
+        if seq is None:
+            self.setpoints_dropped += 1
+        else:
+            self.setpoints_sent += 1
+        return seq
+
+    # ------------------------------------------------------------------ state
+    def state(self) -> JointState:
+        """The latest state report.
+
+        Raises:
+            LinkError: none received within silence_timeout_s (bridge silent), or the port failed.
+        """
+        self._check()
+        with self._cond:
+            if not self._history:
+                raise LinkError(f"no state from the bridge on {self.port} yet")
+            return self._history[-1]
+
+    def wait_state(self, after: float | None = None, timeout: float | None = None) -> JointState:
+        """Block until a state report received after host time `after` (default now) arrives."""
+        after = time.monotonic() if after is None else after
+        deadline = time.monotonic() + (self.params.silence_timeout_s if timeout is None else timeout)
+        with self._cond:
+            while True:
+                self._check_locked()
+                if self._history and self._history[-1].t_rx > after:
+                    return self._history[-1]
+                left = deadline - time.monotonic()
+                if left <= 0:
+                    raise self._silent_error()
+                self._cond.wait(min(left, 0.05))
+
+    def wait_until_still(self, timeout: float = 5.0) -> JointState:
+        """Wait until the bridge reports no joint moving (after a stop)."""
+        deadline = time.monotonic() + timeout
+        while True:
+            s = self.wait_state()
+            if not s.moving and not (s.status & P.Status.STOPPING):
+                return s
+            if time.monotonic() > deadline:
+                raise LinkError(f"arm still moving {timeout:.1f} s after a stop; check the bridge")
+
+    def state_at(self, t: float) -> JointState:
+        """Joint state at host monotonic time `t` (s), linearly interpolated between the two
+        recent states around it (positions and velocities). For the vision loop: where the
+        cameras were at a frame's capture time. A `t` newer than the latest state is
+        extrapolated with its velocity by at most 2 state periods.
+
+        Raises:
+            LookupError: `t` is older than the kept history or too far in the future.
+            LinkError: the bridge is silent or gone.
+        """
+        self._check()
+        with self._cond:
+            hist = list(self._history)
+        if not hist:
+            raise LookupError("no state received yet")
+        last = hist[-1]
+        if t >= last.t:
+            period = (self.version.state_period_us * 1e-6) if self.version else 0.004
+            if t - last.t > 2 * period + 1e-3:
+                raise LookupError(f"time {t:.4f} is {1e3 * (t - last.t):.1f} ms after the latest state")
+            dt = t - last.t
+            return JointState(t, last.t_rx, last.q + last.dq * dt, last.dq.copy(), last.status,
+                              last.fault, last.report)
+        if t < hist[0].t:
+            raise LookupError(f"time {t:.4f} is older than the kept state history "
+                              f"({1e3 * (hist[-1].t - hist[0].t):.0f} ms)")
+        ts = np.fromiter((s.t for s in hist), float, len(hist))
+        i = int(np.searchsorted(ts, t, side="right"))  # hist[i-1].t <= t < hist[i].t
+        a, b = hist[i - 1], hist[i]
+        w = 0.0 if b.t == a.t else (t - a.t) / (b.t - a.t)
+        return JointState(t, b.t_rx, a.q + w * (b.q - a.q), a.dq + w * (b.dq - a.dq),
+                          a.status, a.fault, a.report)
+
+    @property
+    def crc_errors(self) -> int:
+        """Frames from the bridge dropped by the host for a bad CRC/COBS/length/version/type."""
+        return self.decoder.errors
+
+    @property
+    def resyncs(self) -> int:
+        return self.decoder.resyncs
+
+    # ------------------------------------------------------------------ internals
+    def _check(self) -> None:
+        with self._cond:
+            self._check_locked()
+
+    def _check_locked(self) -> None:
+        if self._error is not None:
+            raise self._error
+        if self._ser is None:
+            raise LinkError(f"link to {self.port} is closed; call open() (or use `with Link(...)`)")
+        last = self._history[-1].t_rx if self._history else self._t_open
+        if time.monotonic() - last > self.params.silence_timeout_s and self.version is not None:
+            raise self._silent_error()
+
+    def _silent_error(self) -> LinkError:
+        last = self._history[-1].t_rx if self._history else self._t_open
+        return LinkError(f"bridge on {self.port} silent for {time.monotonic() - last:.2f} s "
+                         f"(limit {self.params.silence_timeout_s:.2f} s); the arm stops by itself "
+                         "(watchdog). Check the cable and the bridge power, then reconnect.")
+
+    def _next_seq(self) -> int:
+        self._seq = (self._seq + 1) & 0xFFFF
+        return self._seq
+
+    def _write(self, msg: P.Message, droppable: bool) -> int | None:
+        """Write one frame without blocking. Bytes the OS did not take are kept and sent first
+        next time; a droppable message that finds such bytes waiting is dropped instead."""
+        ser = self._ser
+        if ser is None:
+            raise LinkError(f"link to {self.port} is closed")
+        with self._tx_lock:
+            try:
+                if self._tx_pending:
+                    n = ser.write(self._tx_pending) or 0
+                    self._tx_pending = self._tx_pending[n:]
+                    if self._tx_pending and droppable:
+                        return None
+                seq = self._next_seq()
+                data = self._tx_pending + P.encode(msg, seq)
+                n = ser.write(data) or 0
+                self._tx_pending = data[n:]
+                return seq
+            except (serial.SerialException, OSError) as e:
+                self._fail(f"writing to {self.port} failed ({e})")
+                raise self._error from None  # type: ignore[misc]
+
+    def _flush_pending(self) -> None:
+        with self._tx_lock:
+            if self._tx_pending and self._ser is not None:
+                n = self._ser.write(self._tx_pending) or 0
+                self._tx_pending = self._tx_pending[n:]
+
+    def _request(self, msg: P.Message, expect: type = P.Ack, tries: int = 3) -> P.Message:
+        """Send a control message and wait for its ACK (VERSION for HELLO). Every control message
+        is idempotent, so an unanswered one is sent again (new seq), `tries` times in all."""
+        what = msg.TYPE.name
+        for _ in range(tries):
+            self._check()
+            seq = self._write(msg, droppable=False)
+            deadline = time.monotonic() + self.params.ack_timeout_s / tries
+            with self._cond:
+                while True:
+                    if self._error is not None:
+                        raise self._error
+                    key = seq if expect is P.Ack else -1
+                    reply = self._replies.pop(key, None)
+                    if isinstance(reply, P.Nack):
+                        raise LinkError(_describe_nack(reply, self.joint_names))
+                    if isinstance(reply, expect):
+                        return reply
+                    left = deadline - time.monotonic()
+                    if left <= 0:
+                        break
+                    self._cond.wait(min(left, 0.05))
+        raise LinkError(f"no answer to {what} from the bridge on {self.port} within "
+                        f"{self.params.ack_timeout_s:.2f} s ({tries} tries). Is the bridge running "
+                        "and is the baud rate right?")
+
+    def _fail(self, why: str) -> None:
+        with self._cond:
+            if self._error is None:
+                self._error = LinkError(f"bridge on {self.port} went away: {why}. The arm stops by "
+                                        "itself (watchdog). Check the cable and the bridge, then "
+                                        "reconnect.")
+            self._cond.notify_all()
+
+    def _clock_offset(self, t_rx: float, t_bridge: float) -> float:
+        """Bridge clock -> host clock: host = bridge + offset, offset = min over recent reports
+        of (t_rx - t_bridge) (the least-delayed report; ~2 s window follows slow drift)."""
+        self._offsets.append(t_rx - t_bridge)
+        return min(self._offsets)
+
+    def _on_frame(self, frame: P.Frame, t_rx: float) -> None:
+        m = frame.msg
+        with self._cond:
+            if isinstance(m, P.StateReport):
+                off = self._clock_offset(t_rx, m.t_bridge_us * 1e-6)
+                s = JointState(m.t_bridge_us * 1e-6 + off, t_rx, np.array(m.q), np.array(m.dq),
+                               P.Status(m.status), P.Fault(m.fault) if m.fault in P.Fault._value2member_map_
+                               else P.Fault.INTERNAL, m)
+                if self._history and s.t < self._history[-1].t:
+                    self._history.clear()  # bridge clock jumped (restart): start over
+                self._history.append(s)
+                while self._history and s.t - self._history[0].t > self.params.history_s:
+                    self._history.popleft()
+            elif isinstance(m, P.VersionInfo):
+                self._replies[-1] = m
+            elif isinstance(m, (P.Ack, P.Nack)):
+                if isinstance(m, P.Nack):
+                    self.nacks.append(m)
+                self._replies[m.seq] = m
+                if len(self._replies) > 256:
+                    self._replies.pop(next(iter(self._replies)))
+            self._cond.notify_all()
+
+    def _read_loop(self) -> None:
+        ser = self._ser
+        assert ser is not None
+        while not self._closing.is_set():
+            try:
+                data = ser.read(max(1, ser.in_waiting))
+                if self._tx_pending:
+                    self._flush_pending()
+            except (serial.SerialException, OSError, TypeError, AttributeError) as e:
+                if not self._closing.is_set():
+                    self._fail(str(e) or type(e).__name__)
+                return
+            if not data:
+                continue
+            t_rx = time.monotonic()
+            for frame in self.decoder.iter_feed(data):
+                self._on_frame(frame, t_rx)
