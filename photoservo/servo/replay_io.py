@@ -32,6 +32,7 @@ from typing import Any
 import cv2
 import numpy as np
 import pyarrow as pa
+import pyarrow.compute as pc
 from rerun.chunk import RrdReader
 
 from photoservo.errors import InputError
@@ -225,6 +226,19 @@ def _blob(rb: pa.RecordBatch, name: str, i: int) -> bytes | None:
     return v.flatten().to_numpy(zero_copy_only=False).tobytes()
 
 
+def _scalar_rows(rb: pa.RecordBatch) -> np.ndarray:
+    """The `Scalars:scalars` column of a chunk as an (N, K) array (vectorised: the arm series
+    run at the control rate)."""
+    col = rb.column("Scalars:scalars")
+    if col.null_count == 0 and len(col):
+        lengths = pc.list_value_length(col).to_numpy(zero_copy_only=False)
+        if np.all(lengths == lengths[0]):
+            return col.flatten().to_numpy(zero_copy_only=False).reshape(len(col), int(lengths[0]))
+    rows = [_num(rb, "Scalars:scalars", i) for i in range(rb.num_rows)]
+    k = max((len(r) for r in rows if r is not None), default=1)
+    return np.array([np.full(k, np.nan) if r is None else r for r in rows])
+
+
 def _decode_image(rb: pa.RecordBatch, i: int) -> np.ndarray:
     blob = _blob(rb, "EncodedImage:blob", i)
     if blob is not None:
@@ -299,7 +313,7 @@ def read_recording(path: str | Path, *, images: bool = False) -> Recording:
     frames: dict[int, FrameMeta] = {}
     estimates: dict[int, EstimateRecord] = {}
     truth: dict[int, TruthRecord] = {}
-    series: dict[str, list[tuple[np.ndarray, np.ndarray]]] = {}
+    series: dict[str, list[tuple[np.ndarray, np.ndarray]]] = {}   # entity -> (t, values) blocks
     events: list[tuple[float, str, str]] = []
     for ep, rb in _chunks(files, incomplete):
         frame, t = _times(rb)
@@ -340,14 +354,15 @@ def read_recording(path: str | Path, *, images: bool = False) -> Recording:
                                _scalar(rb, "TextLog:text", i)))
         elif ep.startswith(("arm/", "timing/")) and t is not None \
                 and "Scalars:scalars" in rb.schema.names:
-            for i in range(n):
-                series.setdefault(ep, []).append((t[i], _num(rb, "Scalars:scalars", i)))
+            series.setdefault(ep, []).append((t, _scalar_rows(rb)))
     if R_.E_RUN not in texts:
         raise InputError(f"{files[0]}: not a photoservo recording (no {R_.E_RUN})")
 
-    def to_series(rows: list[tuple[np.ndarray, np.ndarray]]) -> Series:
-        rows = sorted(rows, key=lambda r: r[0])
-        return Series(np.array([r[0] for r in rows]), np.array([r[1] for r in rows]))
+    def to_series(blocks: list[tuple[np.ndarray, np.ndarray]]) -> Series:
+        t = np.concatenate([b[0] for b in blocks])
+        v = np.concatenate([b[1] for b in blocks])
+        order = np.argsort(t, kind="stable")
+        return Series(t[order], v[order])
 
     arm = {k.split("/", 1)[1]: to_series(v) for k, v in series.items() if k.startswith("arm/")}
     timings = {k.split("/", 1)[1].removesuffix("_ms"): to_series(v)
