@@ -142,7 +142,8 @@ def test_stops_before_joint_range_with_margin():
         end = LIM.q_max[j] if sign > 0 else LIM.q_min[j]
         assert abs(Q[-1, j] - end) < math.radians(3)  # it did get there, not stopped early
         np.testing.assert_allclose(sps[-1].dq, 0, atol=1e-9)
-        assert any("joint range" in s.reason for s in sps)
+        assert any("joint range: slowing" in s.reason for s in sps)
+        assert not any(s.reason.startswith("braking check") for s in sps)  # slowed in time, no emergency
         assert_within_limits(m, sps)
         m = Motion(params, LIM)
 
@@ -187,8 +188,28 @@ def test_water_keepout_stops_a_descending_servo():
     assert min(z) >= z_min
     assert min(z) < z_min + 30  # it came down close to the water first
     np.testing.assert_allclose(sps[-1].dq, 0, atol=1e-9)
-    assert any("water plane" in s.reason for s in sps)
+    assert any("keep-out: slowing the flange" in s.reason for s in sps)
+    assert not any(s.reason.startswith("braking check") for s in sps)
     assert_within_limits(m, sps)
+
+
+def test_braking_check_stops_an_arm_measured_too_close_too_fast():
+    # The measured state already cannot stop in time (say, the arm was pushed): the step must be
+    # a full-limit controlled stop from the measured state, reported as such.
+    m = Motion(dataclasses.replace(PARAMS, tool_speed_max_mm_s=5000.0), LIM)
+    q = HOME_Q.copy()
+    q[4] = m.q_hi_safe[4] - 0.05
+    dq = np.zeros(7)
+    dq[4] = LIM.dq_max[4]
+    sp = m.velocity_step(q, dq, dq)
+    assert sp.reason == "braking check: joint range (E2)"
+    np.testing.assert_allclose(sp.ddq[4], -LIM.dddq_max[4] * m.dt)  # braking at the jerk limit from a = 0
+    low = Motion(dataclasses.replace(PARAMS, z_min_mm=600.0), LIM)
+    dq = np.zeros(7)
+    dq[1] = 0.5  # S2 forward: the flange (at 624.7 mm) drops toward z = 600 at ~0.5 rad/s x 725 mm
+    sp = low.velocity_step(HOME_Q, dq, np.zeros(7))
+    assert sp.reason.startswith("braking check: the flange would go below the water plane")
+    assert sp.ddq[1] < 0
 
 
 def test_controlled_stop_decelerates_within_limits():

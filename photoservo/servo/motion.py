@@ -16,7 +16,8 @@ of the plain Ruckig step:
 2. Joint ranges: every joint keeps `joint_margin_deg` clear of its range ends for targets.
    While moving, a joint's speed toward a range end is capped at the speed from which it can
    still stop (jerk-limited) within half the margin of that end: it slows down before it would
-   overrun.
+   overrun. Likewise a velocity target is scaled down when a keep-out point approaches the
+   water plane or a box face faster than it could stop before it.
 3. Tool-speed cap: the speed of the tool point is kept under `tool_speed_max_mm_s` (velocity
    targets are scaled down; a move is time-scaled, v·s, a·s², j·s³, which keeps its path).
 4. Braking check: the step is accepted only if a controlled stop started from the new setpoint
@@ -163,6 +164,10 @@ class Motion:
         self._brake_inp.target_velocity = np.zeros(N_JOINTS)
         self._brake_inp.target_acceleration = np.zeros(N_JOINTS)
         self._traj = Trajectory(N_JOINTS)
+        # nominal Cartesian deceleration / jerk for the keep-out approach caps: what the weakest
+        # joint gives at a 500 mm lever (mm/s², mm/s³)
+        self._a_cart = float(limits.ddq_max.min()) * 500.0
+        self._j_cart = float(limits.dddq_max.min()) * 500.0
         # length of the chain beyond each joint, up to the tool point (mm): d_j + ... + d_7 + |tool|
         self._chain_mm = np.cumsum(DH_D_MM[::-1])[::-1] + float(np.linalg.norm(self.T_flange_tool[:3, 3]))
         self._override = params.speed_override_pct / 100.0
@@ -302,6 +307,9 @@ class Motion:
         if m > 1.0:
             dq_t /= m  # keep the direction
             reasons.append("joint speed limit")
+        dq_t, near = self._keepout_caps(q_meas, dq_t)
+        if near:
+            reasons.append("keep-out: slowing the " + ", ".join(near))
         v_cap_lo, v_cap_hi = self._range_caps(q_meas)
         clipped = np.clip(dq_t, -v_cap_lo, v_cap_hi)
         if np.any(clipped != dq_t):
@@ -321,8 +329,11 @@ class Motion:
         inp.max_jerk = self.limits.dddq_max
         result = self.otg.update(inp, self.out)
         if result not in (Result.Working, Result.Finished):
-            return self.stop_step(q_meas, dq_meas, reason=f"Ruckig refused the velocity target ({result})")
-        return self._accept(q_meas, dq_meas, self._from_out(), reasons)
+            sp = self.stop_step(q_meas, dq_meas, reason=f"Ruckig refused the velocity target ({result})")
+        else:
+            sp = self._accept(q_meas, dq_meas, self._from_out(), reasons)
+        self.done = False
+        return sp
 
     def stop_step(self, q_meas: np.ndarray, dq_meas: np.ndarray, reason: str = "") -> Setpoint:
         """One period of a controlled stop: velocity brought to zero with the full acceleration
@@ -401,15 +412,49 @@ class Motion:
 
     def _range_caps(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Per joint, the highest speed (>= 0) toward the lower / upper range end from which a
-        jerk-limited stop (at 90 % of the limits, one period of look-ahead) ends inside the
-        range less half the margin."""
-        a, j = 0.9 * self.limits.ddq_max, 0.9 * self.limits.dddq_max
-        v_max = self._override * self.limits.dq_max
-        d_lo = q - self.q_lo_safe
-        d_hi = self.q_hi_safe - q
-        lo = stopping_speed(d_lo - v_max * self.dt, a, j)
-        hi = stopping_speed(d_hi - v_max * self.dt, a, j)
+        jerk-limited stop ends inside the range less half the margin. The stop is planned at
+        70 % of the acceleration and jerk limits after one period at the joint's top speed, so
+        that Ruckig's lag in following the falling cap leaves the braking check (full limits)
+        nothing to catch; the joint comes to rest up to one period of top-speed travel before
+        the bound."""
+        a, j = 0.7 * self.limits.ddq_max, 0.7 * self.limits.dddq_max
+        ahead = self.dt * self._override * self.limits.dq_max
+        lo = stopping_speed(q - self.q_lo_safe - ahead, a, j)
+        hi = stopping_speed(self.q_hi_safe - q - ahead, a, j)
         return lo, hi
+
+    def _keepout_caps(self, q: np.ndarray, dq: np.ndarray) -> tuple[np.ndarray, list[str]]:
+        """Velocity-target filter for the Cartesian keep-out (so the braking check rarely has to
+        stop the arm): for each keep-out point and each boundary (water plane, box faces), the
+        point's approach speed n·(J_p dq) is capped at the speed from which it could stop, with a
+        nominal Cartesian deceleration and jerk, before the boundary, by scaling the whole dq
+        down (the arm slows along the commanded motion; no joint is moved that was not asked
+        to). Heuristic; the braking check is the guarantee."""
+        p = self.params
+        F = fk_frames(q)
+        z, o = F[:-1, :3, 2], F[:-1, :3, 3]
+        pts = self.keepout_points(q)
+        frame_of = {**KEEPOUT_FRAMES, "tool": N_JOINTS}
+        lo = np.array([p.workspace_min_mm[0], p.workspace_min_mm[1], max(p.z_min_mm, p.workspace_min_mm[2])])
+        hi = np.asarray(p.workspace_max_mm)
+        near = []
+        scale = 1.0
+        for name, x in pts.items():
+            n_moving = frame_of[name]
+            Jv = np.zeros((3, N_JOINTS))
+            Jv[:, :n_moving] = np.cross(z[:n_moving], x - o[:n_moving]).T
+            for axis in range(3):
+                for sign, clearance in ((1.0, x[axis] - lo[axis]), (-1.0, hi[axis] - x[axis])):
+                    Jn = sign * Jv[axis]
+                    v_n = float(Jn @ dq)  # < 0: approaching this boundary
+                    if v_n >= 0:
+                        continue
+                    v_allow = float(stopping_speed(np.array(clearance + v_n * 2 * self.dt), self._a_cart, self._j_cart))
+                    if -v_n > v_allow:
+                        scale = min(scale, v_allow / -v_n)
+                        if name not in near:
+                            near.append(name)
+        return dq * scale, near
 
     def _tool_speed(self, q: np.ndarray, dq: np.ndarray) -> float:
         return float(np.linalg.norm(jacobian(q, self.T_flange_tool)[:3] @ dq))
