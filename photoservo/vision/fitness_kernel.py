@@ -16,10 +16,11 @@ from numba import njit, prange
 
 def camera_vector(K: np.ndarray, dist: np.ndarray, size: tuple[int, int]) -> np.ndarray:
     """One camera's intrinsics for the kernel: fx, fy, cx, cy, width, height, k1, k2, p1, p2,
-    k3, k4, k5, k6, distorted (1.0 if any coefficient is non-zero)."""
+    k3, k4, k5, k6, model (0: no distortion, 1: polynomial k1 k2 p1 p2 k3, 2: rational, with
+    k4 k5 k6)."""
     d = [float(x) for x in dist[:8]] + [0.0] * (8 - min(8, len(dist)))
-    return np.array([K[0, 0], K[1, 1], K[0, 2], K[1, 2], size[0], size[1], *d,
-                     1.0 if any(d) else 0.0])
+    model = 2.0 if any(d[5:]) else 1.0 if any(d) else 0.0
+    return np.array([K[0, 0], K[1, 1], K[0, 2], K[1, 2], size[0], size[1], *d, model])
 
 
 # fastmath without 'nnan'/'ninf' where NaN/inf must be seen; full fastmath in the projection
@@ -84,7 +85,25 @@ def _pixel_indices(a, uv, cam, idx, offset):  # pragma: no cover - compiled
             i = np.int32(fr if inside else 0.0) * w + np.int32(fc if inside else 0.0)
             idx[offset + k] = i if inside else np.int32(-1)
             outside += np.int32(not inside)
-    else:
+    elif cam[14] == 1.0:  # polynomial k1 k2 p1 p2 k3: no second division
+        for k in range(uv.shape[0]):
+            u = uv[k, 0]
+            v = uv[k, 1]
+            Z = a20 * u + a21 * v + a22
+            iz = 1.0 / Z
+            x = (a00 * u + a01 * v + a02) * iz
+            y = (a10 * u + a11 * v + a12) * iz
+            r2 = x * x + y * y
+            radial = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))
+            xd = x * radial + 2.0 * p1 * x * y + p2 * (r2 + 2.0 * x * x)
+            yd = y * radial + p1 * (r2 + 2.0 * y * y) + 2.0 * p2 * x * y
+            fc = fx * xd + cx + 0.5
+            fr = fy * yd + cy + 0.5
+            inside = (Z > 0.0) & (fc >= 0.0) & (fc < W) & (fr >= 0.0) & (fr < H)
+            i = np.int32(fr if inside else 0.0) * w + np.int32(fc if inside else 0.0)
+            idx[offset + k] = i if inside else np.int32(-1)
+            outside += np.int32(not inside)
+    else:  # rational model (k4 k5 k6)
         for k in range(uv.shape[0]):
             u = uv[k, 0]
             v = uv[k, 1]
