@@ -20,6 +20,7 @@ VERBS: dict[str, tuple[str, str]] = {
     "model": ("photoservo.servo.cmd_model", "build the photo-model of a photo and preview its sampling points"),
     "synth": ("photoservo.servo.cmd_synth", "render a synthetic stereo scene with ground truth"),
     "scan": ("photoservo.servo.cmd_scan", "fitness maps (pose axis x alpha) around a given pose, as heatmap PNGs"),
+    "estimate": ("photoservo.servo.cmd_estimate", "find the photo's creature in a stereo pair: 6-DOF pose and size"),
 }
 
 

@@ -18,6 +18,8 @@ from photoservo.errors import InputError
 from photoservo.robot.emulator import EmulatorParams
 from photoservo.robot.link import LinkParams
 from photoservo.tomlconf import build_dataclass, configs_dir, read_toml
+from photoservo.vision.estimator import EstimatorParams
+from photoservo.vision.ga import GAParams
 from photoservo.servo.control import ServoParams
 from photoservo.servo.motion import MotionParams
 from photoservo.vision.fitness import FitnessParams
@@ -31,6 +33,8 @@ class Config:
 
     photo_model: PhotoModelParams
     fitness: FitnessParams
+    ga: GAParams
+    estimator: EstimatorParams
     servo: ServoParams
     synthetic: SynthParams
     link: LinkParams

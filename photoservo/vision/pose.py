@@ -1,0 +1,88 @@
+"""Orientation of the flat photo-model as heading and tilt (the GA's three orientation genes).
+
+A pose is "model in left-camera frame" (DESIGN.md): X_left = R · X_model + t. The model is flat
+(z_model = 0); its normal is R[:, 2]. We write
+
+    R = R_tilt(tilt_x, tilt_y) · Rz(psi)
+
+* psi (heading): the turn of the model about its own normal, radians, any value;
+* (tilt_x, tilt_y): a rotation vector perpendicular to the camera's optical axis that tips the
+  model's normal away from the camera's z axis; its length is the tilt angle
+  (tilt = angle between R[:, 2] and the optical axis), radians.
+
+R = I (psi = 0, no tilt) is the model facing the left camera as photographed. Tilt is weakly
+observable for a flat target, heading strongly: the two errors are reported separately by
+`heading_tilt_error` (a swing-twist split of the error rotation about the model normal).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+
+def rotation_from_heading_tilt(psi: np.ndarray, tilt_x: np.ndarray, tilt_y: np.ndarray) -> np.ndarray:
+    """(..., 3, 3) rotations R = R_tilt(tilt_x, tilt_y) · Rz(psi); angles in radians.
+
+    >>> np.allclose(rotation_from_heading_tilt(0.0, 0.0, 0.0), np.eye(3))
+    True
+    """
+    psi, tx, ty = np.broadcast_arrays(*(np.asarray(a, dtype=np.float64) for a in (psi, tilt_x, tilt_y)))
+    th = np.hypot(tx, ty)
+    safe = np.where(th > 1e-12, th, 1.0)
+    kx, ky = np.where(th > 1e-12, tx / safe, 1.0), np.where(th > 1e-12, ty / safe, 0.0)
+    s, c = np.sin(th), np.cos(th)
+    v = 1.0 - c
+    # Rodrigues with axis k = (kx, ky, 0)
+    Rt = np.empty(th.shape + (3, 3))
+    Rt[..., 0, 0] = c + kx * kx * v
+    Rt[..., 0, 1] = kx * ky * v
+    Rt[..., 0, 2] = ky * s
+    Rt[..., 1, 0] = kx * ky * v
+    Rt[..., 1, 1] = c + ky * ky * v
+    Rt[..., 1, 2] = -kx * s
+    Rt[..., 2, 0] = -ky * s
+    Rt[..., 2, 1] = kx * s
+    Rt[..., 2, 2] = c
+    cp, sp = np.cos(psi), np.sin(psi)
+    Rz = np.zeros(psi.shape + (3, 3))
+    Rz[..., 0, 0], Rz[..., 0, 1] = cp, -sp
+    Rz[..., 1, 0], Rz[..., 1, 1] = sp, cp
+    Rz[..., 2, 2] = 1.0
+    return Rt @ Rz
+
+
+def heading_tilt_from_rotation(R: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Inverse of `rotation_from_heading_tilt`: (psi, tilt_x, tilt_y), radians, psi in (-pi, pi].
+    Defined for tilts below 180 degrees."""
+    R = np.asarray(R, dtype=np.float64)
+    n = R[..., :, 2]
+    th = np.arctan2(np.hypot(n[..., 0], n[..., 1]), n[..., 2])
+    # axis = e_z x n = (-n_y, n_x, 0), normalised
+    ax, ay = -n[..., 1], n[..., 0]
+    norm = np.hypot(ax, ay)
+    safe = np.where(norm > 1e-12, norm, 1.0)
+    tx = np.where(norm > 1e-12, ax / safe * th, 0.0)
+    ty = np.where(norm > 1e-12, ay / safe * th, 0.0)
+    Rt = rotation_from_heading_tilt(np.zeros_like(th), tx, ty)
+    Rz = np.swapaxes(Rt, -1, -2) @ R
+    psi = np.arctan2(Rz[..., 1, 0], Rz[..., 0, 0])
+    return psi, tx, ty
+
+
+def tilt_angle(R: np.ndarray) -> np.ndarray:
+    """Angle (rad) between the model normal R[:, 2] and the camera's optical axis."""
+    R = np.asarray(R)
+    return np.arctan2(np.hypot(R[..., 0, 2], R[..., 1, 2]), R[..., 2, 2])
+
+
+def heading_tilt_error(R_true: np.ndarray, R_est: np.ndarray) -> tuple[float, float]:
+    """(heading error, tilt error) in degrees between two model orientations.
+
+    Tilt error: angle between the two model normals. Heading error: the twist left about the
+    normal once the normals are aligned (swing-twist split of R_true^T R_est)."""
+    R_true = np.asarray(R_true, dtype=np.float64)
+    R_est = np.asarray(R_est, dtype=np.float64)
+    tilt = np.arctan2(np.linalg.norm(np.cross(R_true[:, 2], R_est[:, 2])), R_true[:, 2] @ R_est[:, 2])
+    E = R_true.T @ R_est
+    psi, _, _ = heading_tilt_from_rotation(E)
+    return float(np.degrees(abs(psi))), float(np.degrees(tilt))

@@ -1,0 +1,134 @@
+"""The estimator (vision/estimator.py) on small seeded synthetic scenes: it finds the creature from
+the default search volume, repeats itself with a seed, says found=false on empty water."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+import pytest
+
+from photoservo.servo.config import load_config
+from photoservo.vision.estimator import (
+    Convergence,
+    GeneSpace,
+    PoseSearch,
+    estimate,
+    match_blobs,
+    reflected_rotation,
+    target_blobs,
+)
+from photoservo.vision.fitness import stereo_hue
+from photoservo.vision.photo_model import build_photo_model
+from photoservo.vision.pose import heading_tilt_error, rotation_from_heading_tilt
+from photoservo.vision.synthetic import random_scene
+
+CFG = load_config()
+
+
+@pytest.fixture(scope="module")
+def scene():
+    sc = random_scene(11, CFG.synthetic, CFG.photo_model, kind="squid", effects=("waves", "noise"),
+                      distance_mm=700.0, tilt_deg=15.0)
+    return sc, build_photo_model(sc.photo, CFG.photo_model)
+
+
+def truth(sc):
+    t = sc.truth
+    return np.array(t["rotation"]), np.array(t["position_mm"]), t["alpha_px_per_mm"]
+
+
+def test_finds_the_creature_from_the_default_volume(scene):
+    sc, model = scene
+    est = estimate(model, sc.left, sc.right, sc.rig, CFG.ga, CFG.estimator, CFG.fitness, seed=0)
+    R, t, alpha = truth(sc)
+    assert est.found and est.confidence > 0.5
+    assert np.linalg.norm(est.position_mm - t) < 0.03 * t[2]
+    assert abs(est.alpha_px_per_mm / alpha - 1) < 0.08
+    heading, _ = heading_tilt_error(R, est.rotation)
+    assert heading < 5.0
+    # converged, not stopped at the cap
+    assert CFG.estimator.min_generations < est.generations < CFG.estimator.max_generations
+    js = est.to_json()
+    assert set(js) >= {"found", "position_mm", "rotation", "alpha_px_per_mm", "size_mm", "fitness",
+                       "generations", "seconds"}
+    assert js["size_mm"] == pytest.approx(list(model.size_mm(est.alpha_px_per_mm)))
+
+
+def test_same_seed_same_estimate(scene):
+    sc, model = scene
+    a = estimate(model, sc.left, sc.right, sc.rig, CFG.ga, CFG.estimator, CFG.fitness, seed=5)
+    b = estimate(model, sc.left, sc.right, sc.rig, CFG.ga, CFG.estimator, CFG.fitness, seed=5)
+    ja, jb = a.to_json(), b.to_json()
+    ja.pop("seconds"), jb.pop("seconds")
+    assert ja == jb
+
+
+def test_empty_water_is_not_found():
+    sc = random_scene(12, CFG.synthetic, CFG.photo_model, kind="crab", effects=("waves", "glints", "noise"),
+                      empty=True)
+    model = build_photo_model(sc.photo, CFG.photo_model)
+    est = estimate(model, sc.left, sc.right, sc.rig, CFG.ga, CFG.estimator, CFG.fitness, seed=0)
+    assert not est.found
+    js = est.to_json()
+    assert js["found"] is False
+    assert all(js[k] is None for k in ("position_mm", "rotation", "alpha_px_per_mm", "size_mm"))
+
+
+def test_blobs_pair_along_epipolar_lines_and_triangulate(scene):
+    sc, model = scene
+    frame = stereo_hue(sc.left, sc.right, CFG.fitness)
+    p = CFG.estimator
+    pairs = match_blobs(target_blobs(frame.left, model.target_hues, p.min_blob_px),
+                        target_blobs(frame.right, model.target_hues, p.min_blob_px), sc.rig, p)
+    assert pairs
+    _, t, _ = truth(sc)
+    # the blob centroid is near the model origin: depth within a few percent
+    assert abs(pairs[0].position_mm[2] / t[2] - 1) < 0.05
+
+
+def test_tracking_api_window_and_new_frame(scene):
+    sc, model = scene
+    R, t, alpha = truth(sc)
+    frame = stereo_hue(sc.left, sc.right, CFG.fitness)
+    search = PoseSearch(model, sc.rig, frame, CFG.ga, CFG.estimator, CFG.fitness, np.random.default_rng(0))
+    R0 = R @ rotation_from_heading_tilt(math.radians(8), 0.0, 0.0)
+    search.set_window(R0, t + [10, -5, 20], alpha * 1.05, position_mm=40, heading_deg=20, tilt_deg=20, alpha_frac=0.2)
+    c = search.step(100)
+    assert np.linalg.norm(c.position_mm - t) < 0.05 * t[2]
+    f_before = c.fitness
+    search.set_frame(frame)  # same frame again: scores recomputed, best unchanged
+    assert search.best().fitness == pytest.approx(f_before)
+    search.reset_full()
+    assert search.ga.region.lo[2] == pytest.approx(1000.0 / CFG.estimator.z_max_mm)
+
+
+def test_gene_space_encode_decode_roundtrip(scene):
+    sc, model = scene
+    R, t, alpha = truth(sc)
+    for kind in ("image", "cartesian"):
+        space = GeneSpace(kind, sc.rig, model, CFG.estimator)
+        R2, t2, a2, valid = space.decode(space.encode(R, t, alpha))
+        assert valid[0] and np.allclose(R2[0], R) and np.allclose(t2[0], t) and a2[0] == pytest.approx(alpha)
+
+
+def test_reflected_rotation_mirrors_the_normal_about_the_line_of_sight():
+    R = rotation_from_heading_tilt(0.3, 0.25, -0.1)
+    t = np.array([50.0, -30.0, 800.0])
+    R2 = reflected_rotation(R, t)
+    d = t / np.linalg.norm(t)
+    assert R2[:, 2] @ d == pytest.approx(R[:, 2] @ d)
+    assert np.allclose(R2[:, 2] + R[:, 2], 2 * (R[:, 2] @ d) * d)
+
+
+def test_convergence_waits_for_patience_and_tolerances():
+    p = dataclasses.replace(CFG.estimator, min_generations=5, patience=10, fitness_tol=1e-3, position_tol_mm=1.0)
+    conv = Convergence(p)
+    R, t = np.eye(3), np.array([0.0, 0.0, 500.0])
+    stops = [conv.update(0.5 + 0.01 * min(i, 20), R, t, 1.0) for i in range(40)]
+    # improving until generation 20, flat after: converged exactly `patience` generations later
+    assert not any(stops[:30]) and stops[30]
+    conv = Convergence(p)
+    moving = [conv.update(0.9, R, t + [2.0 * i, 0, 0], 1.0) for i in range(40)]
+    assert not any(moving)  # the pose keeps moving: not converged
