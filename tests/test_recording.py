@@ -85,6 +85,7 @@ def test_frames_and_static_setup_read_back_exactly(tmp_path: Path, mode: str):
     assert s.versions["rerun"].startswith("0.41")
     assert s.config_toml == CONFIG_TOML
     rig2 = parse_rig(tomllib.loads(s.rig_toml))
+    assert np.array_equal(s.rig().right.K, rig.right.K)
     assert np.array_equal(rig2.left.K, rig.left.K) and np.array_equal(rig2.T, rig.T)
     assert np.array_equal(s.photo_bgr, photo)
     for name in ("inner_uv", "inner_hue", "outer_uv", "target_hues", "mask"):
@@ -172,7 +173,7 @@ from test_recording import frame_pair
 from photoservo.servo.recording import Recorder
 path, segment_s = sys.argv[1], float(sys.argv[2])
 with Recorder.open(path, "track", segment_s=segment_s) as rec:
-    rec.log_static_setup(None, None, None, "[x]\n", seed=3)
+    rec.log_static_setup(None, None, None, "[x]\n", seed={"ga": 3, "world": 4})
     k = 0
     while True:
         rec.log_frame(k, k / 30, *frame_pair(k))
@@ -241,7 +242,7 @@ def test_hard_kill_leaves_verified_segments_read_as_one(tmp_path: Path):
     assert n >= 6 * len(finished)                        # at least all finished segments
     assert [f.index for f in r.images] == list(range(n))
     assert all(np.array_equal(f.right, frame_pair(f.index)[1]) for f in r.images)
-    assert r.setup.seed == 3
+    assert r.setup.seed == {"ga": 3, "world": 4}
 
 
 def _pose(R: np.ndarray, p) -> np.ndarray:

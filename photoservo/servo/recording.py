@@ -123,6 +123,7 @@ PNG_PARAMS = [cv2.IMWRITE_PNG_COMPRESSION, 1,
 JPEG_QUALITY = 90
 PATH_S = 10.0          # seconds of flange path kept in `world/flange/path`
 PATH_PERIOD_S = 0.5    # how often the path strip is re-logged
+SPAWN_WAIT_S = 5.0     # longest wait for a spawned viewer to listen
 ARM_BATCH = 250        # queued arm samples written at once when no frames come (0.5 s at 500 Hz)
 JOINT_NAMES = ("S1", "S2", "S3", "E1", "E2", "W1", "W2")
 PREVIEW_WARNING = ("PREVIEW RECORDING: frames are JPEG (lossy, hue changes). This recording "
@@ -375,9 +376,28 @@ class Recorder:
 
     # --- sinks and segments ---------------------------------------------------------------
 
-    def _spawn_viewer(self, port: int = 9876) -> str:
-        """Start a viewer process (non-blocking) and return its gRPC URL."""
-        rr.spawn(port=port, connect=False, hide_welcome_screen=True)
+    def _spawn_viewer(self, port: int = 9876) -> str | None:
+        """Start a viewer process and return its gRPC URL (None if it cannot start: the
+        recording then goes to the file only). rerun's spawn waits until the viewer listens;
+        we wait at most SPAWN_WAIT_S for that, so a viewer that cannot come up (no display)
+        never holds the session; data is buffered for it meanwhile."""
+        failed: list[BaseException] = []
+        cli = rerun_cli()
+
+        def spawn() -> None:
+            try:
+                rr.spawn(port=port, connect=False, hide_welcome_screen=True, recording=self._rec,
+                         executable_path=str(cli) if cli.is_file() else None)
+            except Exception as e:  # noqa: BLE001 - reported below, the file still gets written
+                failed.append(e)
+
+        th = threading.Thread(target=spawn, name="recorder-spawn-viewer", daemon=True)
+        th.start()
+        th.join(SPAWN_WAIT_S)
+        if failed:
+            warnings.warn(f"viewer could not be started ({failed[0]}); recording to {self.path} only",
+                          stacklevel=4)
+            return None
         return f"rerun+http://127.0.0.1:{port}/proxy"
 
     def _next_file(self) -> Path:
@@ -477,7 +497,7 @@ class Recorder:
 
     def _run_info(self, seed: Any, versions: Mapping[str, str] | None) -> dict:
         return {"format": FORMAT_VERSION, "verb": self.verb, "mode": self.mode,
-                "replayable": self.replayable, "seed": seed,
+                "replayable": self.replayable, "seed": dict(seed) if isinstance(seed, Mapping) else seed,
                 "versions": dict(versions or software_versions()),
                 "recording_id": self.recording_id, "segment_s": self.segment_s,
                 "started_utc": datetime.now(UTC).isoformat(timespec="seconds"),
@@ -487,11 +507,13 @@ class Recorder:
 
     def log_static_setup(self, rig_toml_text: str | None, photo_bgr: np.ndarray | None = None,
                          model: Any = None, config_toml_text: str | None = None,
-                         seed: int | None = None, versions: Mapping[str, str] | None = None) -> None:
+                         seed: int | Mapping[str, int] | None = None,
+                         versions: Mapping[str, str] | None = None) -> None:
         """Everything replay needs besides the frames, logged static (and repeated in every
         segment): the rig (TOML text, and the Pinholes/stereo transform drawn from it), the
         photo (PNG) and its PhotoModel (every array, bit-exact), the effective config TOML,
-        the seed and the software versions. Any part may be None (e.g. for `move`)."""
+        the seed (one int, or several by name, e.g. {"ga": 1, "world": 2}) and the software
+        versions (default: `software_versions()`). Any part may be None (e.g. for `move`)."""
         self._check()
         with self._lock:
             self._static = [(e, p) for e, p in self._static if e != E_RUN]

@@ -57,8 +57,18 @@ class Setup:
     warning: str | None = None      # the preview-mode warning, if any
 
     @property
-    def seed(self) -> int | None:
+    def seed(self) -> int | dict | None:
+        """The seed as logged: one int, or a dict of named seeds."""
         return self.run.get("seed")
+
+    def rig(self) -> Any:
+        """The recorded rig (`vision.rig.Rig`), or None."""
+        if self.rig_toml is None:
+            return None
+        import tomllib
+
+        from photoservo.vision.rig import parse_rig
+        return parse_rig(tomllib.loads(self.rig_toml), "recorded rig")
 
     @property
     def versions(self) -> dict:
