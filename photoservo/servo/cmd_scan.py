@@ -54,10 +54,13 @@ class _Bar:
 
     def step(self, label: str) -> None:
         self.done += 1
+        pct = 100 * self.done // self.total
+        if pct == 100 * (self.done - 1) // self.total and self.done != self.total:
+            return  # redraw only when the percentage changes
         k = self.width * self.done // self.total
         el = time.monotonic() - self.t0
         sys.stderr.write(f"\rscan {label:<3} [{'#' * k}{'.' * (self.width - k)}] "
-                         f"{100 * self.done // self.total:3d}% {el:5.1f}s")
+                         f"{pct:3d}% {el:5.1f}s")
         if self.done == self.total:
             sys.stderr.write("\n")
         sys.stderr.flush()

@@ -159,7 +159,7 @@ def draw_slice(s: ScanSlice, title: str, plot_w: int = 480, plot_h: int = 360) -
         y = round(top + plot_h - 1 - q * (plot_h - 1))
         cv2.line(img, (bx + 16, y), (bx + 20, y), _INK, 1)
         _text(img, f"{lo + q * (hi - lo):.2f}", (bx + 23, y))
-    _text(img, "fitness", (bx + 8, top + plot_h + 16), 0.45, "center")
+    _text(img, "fitness", (bx + 8, top + plot_h + 34), 0.45, "center")
 
     # the given pose and the peak
     j0 = float(np.interp(0.0, s.offsets, np.arange(n_x)))
@@ -170,8 +170,8 @@ def draw_slice(s: ScanSlice, title: str, plot_w: int = 480, plot_h: int = 360) -
     cv2.circle(img, (px(j), py(i)), 9, (255, 255, 255), 2, cv2.LINE_AA)
     cv2.circle(img, (px(j), py(i)), 11, (0, 0, 0), 1, cv2.LINE_AA)
     _text(img, title, (left, 14), 0.5)
-    _text(img, f"peak F = {f:.3f} at {s.axis} {d:+.1f} {s.unit}, alpha {a:.3g} px/mm  "
-               f"(white ring; magenta +: given pose)", (left, 36), 0.42)
+    _text(img, f"peak F = {f:.3f} at {s.axis} {d:+.1f} {s.unit}, alpha {a:.3g} px/mm (ring); "
+               "+ = given pose", (left, 36), 0.42)
     return img
 
 
