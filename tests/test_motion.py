@@ -244,3 +244,19 @@ def test_motion_params_validation():
 
 def test_docstring_example_runs():
     assert doctest.testmod(motion_module).failed == 0
+
+
+def test_keepout_point_jacobians_match_finite_differences():
+    m = Motion(dataclasses.replace(PARAMS, tool_offset_mm=(10.0, -20.0, 150.0)), LIM)
+    q = HOME_Q + np.array([0.3, -0.2, 0.5, 0.1, -0.7, 0.2, 0.4])
+    names, P, J = m._point_jacobians(q)
+    np.testing.assert_allclose(P, np.array(list(m.keepout_points(q).values())), atol=1e-9)
+    np.testing.assert_allclose(J[-1], jacobian(q, m.T_flange_tool)[:3], atol=1e-9)
+    h = 1e-6
+    for i in range(7):
+        e = np.zeros(7)
+        e[i] = h
+        Pp = np.array(list(m.keepout_points(q + e).values()))
+        Pm = np.array(list(m.keepout_points(q - e).values()))
+        np.testing.assert_allclose(J[:, :, i], (Pp - Pm) / (2 * h), atol=1e-4)
+    assert names == list(m.keepout_points(q))

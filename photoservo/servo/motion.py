@@ -140,7 +140,7 @@ class Motion:
     True
     """
 
-    _BRAKE_SAMPLE_S = 0.01  # sampling step of the braking trajectory in the braking check (s)
+    _BRAKE_SAMPLE_S = 0.02  # sampling step of the braking trajectory in the braking check (s)
 
     def __init__(self, params: MotionParams, limits: PA10Limits, T_flange_tool: np.ndarray | None = None):
         self.params = params
@@ -307,7 +307,8 @@ class Motion:
         if m > 1.0:
             dq_t /= m  # keep the direction
             reasons.append("joint speed limit")
-        dq_t, near = self._keepout_caps(q_meas, dq_t)
+        names, P, J = self._point_jacobians(q_meas)
+        dq_t, near = self._keepout_caps(names, P, J, dq_t)
         if near:
             reasons.append("keep-out: slowing the " + ", ".join(near))
         v_cap_lo, v_cap_hi = self._range_caps(q_meas)
@@ -316,7 +317,7 @@ class Motion:
             names = np.array(JOINT_NAMES)[clipped != dq_t]
             reasons.append("joint range: slowing " + ", ".join(names))
             dq_t = clipped
-        speed = self._tool_speed(q_meas, dq_t)
+        speed = float(np.linalg.norm(J[-1] @ dq_t))  # the tool point
         if speed > self.params.tool_speed_max_mm_s:
             dq_t *= self.params.tool_speed_max_mm_s / speed
             reasons.append("tool speed cap")
@@ -423,38 +424,40 @@ class Motion:
         hi = stopping_speed(self.q_hi_safe - q - ahead, a, j)
         return lo, hi
 
-    def _keepout_caps(self, q: np.ndarray, dq: np.ndarray) -> tuple[np.ndarray, list[str]]:
-        """Velocity-target filter for the Cartesian keep-out (so the braking check rarely has to
-        stop the arm): for each keep-out point and each boundary (water plane, box faces), the
-        point's approach speed n·(J_p dq) is capped at the speed from which it could stop, with a
-        nominal Cartesian deceleration and jerk, before the boundary, by scaling the whole dq
-        down (the arm slows along the commanded motion; no joint is moved that was not asked
-        to). Heuristic; the braking check is the guarantee."""
-        p = self.params
+    def _point_jacobians(self, q: np.ndarray) -> tuple[list[str], np.ndarray, np.ndarray]:
+        """Keep-out point names, positions P (K, 3) (mm, base frame) and translational Jacobians
+        J (K, 3, 7) at q: J_v,i = z_{i-1} × (p - o_{i-1}) for the joints that move the point."""
         F = fk_frames(q)
         z, o = F[:-1, :3, 2], F[:-1, :3, 3]
-        pts = self.keepout_points(q)
-        frame_of = {**KEEPOUT_FRAMES, "tool": N_JOINTS}
+        names = [*KEEPOUT_FRAMES, "tool"]
+        moved_by = [*KEEPOUT_FRAMES.values(), N_JOINTS]
+        P = np.array([F[i][:3, 3] for i in KEEPOUT_FRAMES.values()] + [(F[-1] @ self.T_flange_tool)[:3, 3]])
+        r = P[:, None, :] - o[None, :, :]  # (K, 7, 3)
+        J = np.stack([z[:, 1] * r[..., 2] - z[:, 2] * r[..., 1],
+                      z[:, 2] * r[..., 0] - z[:, 0] * r[..., 2],
+                      z[:, 0] * r[..., 1] - z[:, 1] * r[..., 0]], axis=1)  # (K, 3, 7)
+        J *= (np.arange(N_JOINTS)[None, :] < np.array(moved_by)[:, None])[:, None, :]
+        return names, P, J
+
+    def _keepout_caps(self, names: list[str], P: np.ndarray, J: np.ndarray, dq: np.ndarray) -> tuple[np.ndarray, list[str]]:
+        """Velocity-target filter for the Cartesian keep-out (so the braking check rarely has to
+        stop the arm): for each keep-out point and each boundary (water plane, box faces), the
+        point's approach speed is capped at the speed from which it could stop, with a nominal
+        Cartesian deceleration and jerk, two periods ahead, before the boundary, by scaling the
+        whole dq down (the arm slows along the commanded motion; no joint is moved that was
+        not asked to). Heuristic; the braking check is the guarantee."""
+        p = self.params
         lo = np.array([p.workspace_min_mm[0], p.workspace_min_mm[1], max(p.z_min_mm, p.workspace_min_mm[2])])
         hi = np.asarray(p.workspace_max_mm)
-        near = []
-        scale = 1.0
-        for name, x in pts.items():
-            n_moving = frame_of[name]
-            Jv = np.zeros((3, N_JOINTS))
-            Jv[:, :n_moving] = np.cross(z[:n_moving], x - o[:n_moving]).T
-            for axis in range(3):
-                for sign, clearance in ((1.0, x[axis] - lo[axis]), (-1.0, hi[axis] - x[axis])):
-                    Jn = sign * Jv[axis]
-                    v_n = float(Jn @ dq)  # < 0: approaching this boundary
-                    if v_n >= 0:
-                        continue
-                    v_allow = float(stopping_speed(np.array(clearance + v_n * 2 * self.dt), self._a_cart, self._j_cart))
-                    if -v_n > v_allow:
-                        scale = min(scale, v_allow / -v_n)
-                        if name not in near:
-                            near.append(name)
-        return dq * scale, near
+        V = J @ dq  # (K, 3) point velocities (mm/s)
+        approach = np.concatenate([-V, V], axis=1)  # toward the lower faces, toward the upper faces
+        clearance = np.concatenate([P - lo, hi - P], axis=1)
+        allow = stopping_speed(clearance - 2 * self.dt * np.maximum(approach, 0), self._a_cart, self._j_cart)
+        over = approach > allow
+        if not over.any():
+            return dq, []
+        scale = float(np.min(allow[over] / approach[over]))
+        return dq * scale, [n for n, o in zip(names, over.any(axis=1)) if o]
 
     def _tool_speed(self, q: np.ndarray, dq: np.ndarray) -> float:
         return float(np.linalg.norm(jacobian(q, self.T_flange_tool)[:3] @ dq))
