@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import dataclasses
-import itertools
 import os
 import time
 
@@ -117,12 +116,13 @@ def _move_reaches_target(emu, link):
     assert emu.model.setpoint_seq == link._seq and emu.model.refused == 0
 
 
-def test_controlled_stop_when_setpoints_cease_then_brake(emu, link):
+def ramp_then_silence(link: Link) -> bool:
+    """Ramp S1 to half speed over 0.4 s of setpoints, then stop sending. False if the bridge
+    refused a setpoint (this thread stalled > 3 periods on a busy machine: the watchdog fired)."""
     link.enable()
-    q0 = link.wait_state().q
-    # ramp S1 to full speed, then go silent while it is moving
+    q = link.wait_state().q
     v = np.zeros(7)
-    q = q0.copy()
+    n_nacks = len(link.nacks)
     t_next = time.monotonic()
     for _ in range(100):
         v[0] = min(v[0] + LIMITS.ddq_max[0] * T * 0.9, LIMITS.dq_max[0] * 0.5)
@@ -130,21 +130,33 @@ def test_controlled_stop_when_setpoints_cease_then_brake(emu, link):
         link.send_setpoint(q, v)
         t_next += T
         time.sleep(max(0.0, t_next - time.monotonic()))
-    t_silent = time.monotonic()
-    speeds = []
-    while time.monotonic() - t_silent < 0.45 and not (speeds and speeds[-1][1] == 0.0):
-        st = emu.true_state()
-        speeds.append((st.t, st.dq[0], st.status))
-        time.sleep(0.002)
-    # watchdog: stopping within a few periods of silence (3 T + scheduling slack)
-    first_stop = next(t for t, _, s in speeds if s & P.Status.STOPPING)
-    assert first_stop - t_silent < 3 * T + 0.03
-    # a ramp down, not a brake: from v it takes about v / ddq_max (exact bound: the model test
-    # below; wall-clock samples of a thread on a loaded machine are only approximate)
-    v_silent = max(v for _, v, _ in speeds)
-    t_rest = next(t for t, v, _ in speeds if t > first_stop and v == 0.0)
-    assert t_rest - first_stop >= 0.7 * v_silent / LIMITS.ddq_max[0]
-    assert all(b <= a for (_, a, _), (_, b, _) in itertools.pairwise(speeds))  # never speeds up
+    time.sleep(0.02)
+    return len(link.nacks) == n_nacks
+
+
+def test_controlled_stop_when_setpoints_cease_then_brake(emu, link):
+    for _ in range(3):  # a stalled test thread trips the watchdog early: try again from rest
+        if ramp_then_silence(link):
+            break
+        link.stop()
+        link.wait_until_still()
+    else:
+        pytest.skip("machine too busy to stream 3 s of setpoints without a 12 ms stall")
+    t_last_setpoint = link.wait_state().report.t_host_echo_us * 1e-6
+    time.sleep(0.4)  # long enough to stop (v/ddq_max = 0.25 s), shorter than the brake timeout
+    hist = [s for s in link.history() if s.t >= t_last_setpoint - 0.02]  # every report, 4 ms apart
+    s_first = next(s for s in hist if s.status & P.Status.STOPPING)
+    # watchdog: the first tick after 3 silent periods begins a controlled stop (3..4 T after the
+    # last setpoint arrived, exactly so in the model test below; here + line time and the
+    # scheduling of two Python threads on a shared 2-core machine)
+    assert 3 * T <= s_first.t - t_last_setpoint <= 10 * T
+    assert all(s.status & P.Status.TRACKING for s in hist if s.t < s_first.t)
+    # decelerates no faster than ddq_max (bridge time between reports), never speeds up, stops
+    moving = [s for s in hist if s.t >= s_first.t - T]
+    dq = np.array([s.dq[0] for s in moving])
+    t = np.array([s.report.t_bridge_us * 1e-6 for s in moving])
+    assert np.all(np.diff(dq) <= 1e-9)
+    assert np.all(-np.diff(dq) <= LIMITS.ddq_max[0] * np.diff(t) + 1e-4)
     s = link.wait_state()
     assert not s.moving and s.servo_on and s.status & P.Status.WATCHDOG
     assert not s.status & P.Status.BRAKED
@@ -293,7 +305,7 @@ def test_state_at_interpolates_between_reports(emu, link):
     link.enable()
     q0 = link.wait_state().q
     stream(link, q0, q0 + np.radians([5, 0, 0, 0, 0, 0, 0]), speed=0.8)
-    hist = list(link._history)
+    hist = link.history()
     a, b = hist[-30], hist[-29]
     t = 0.25 * a.t + 0.75 * b.t
     s = link.state_at(t)
@@ -325,6 +337,14 @@ def test_model_watchdog_decelerates_within_ddq_max():
         assert m.handle(P.Frame(1, 2 + k, P.JointSetpoint(0, tuple(q), tuple(away * v))), t) == []
         m.tick(t)
     np.testing.assert_allclose(np.abs(m.dq), 0.5 * LIMITS.dq_max, rtol=0.02)
+    # the last setpoint arrived at t (in the loop above, just before that tick); ticks with
+    # silence 1 T, 2 T, 3 T - eps keep tracking, the first with silence > 3 T stops
+    for k in (1, 2, 3):
+        m.tick(t + k * T - (1e-9 if k == 3 else 0.0))
+        assert m.status() & P.Status.TRACKING and not m.status() & P.Status.STOPPING
+    t += 3 * T + 1e-9
+    m.tick(t)
+    assert m.status() & P.Status.STOPPING and m.status() & P.Status.WATCHDOG
     dqs = [m.dq.copy()]
     for _ in range(120):  # 0.48 s: long enough to stop, shorter than the brake timeout
         t += T

@@ -43,12 +43,25 @@ def half_rig() -> Rig:
     return Rig(half(r.left), half(r.right), r.R, r.T)
 
 
+MARKS_UV = np.array([[0.0, 0.0], [-45.0, -18.0], [45.0, -18.0], [45.0, 18.0], [-45.0, 18.0]])  # px from origin
+
+
 def marked_photo() -> np.ndarray:
-    """A red ellipse on white with a small green disc exactly at its bounding-box centre."""
+    """A red ellipse on white with green discs at its bounding-box centre (the model origin)
+    and at the offsets MARKS_UV (photo px)."""
     photo = np.full((121, 201, 3), 250, np.uint8)
     cv2.ellipse(photo, (100, 60), (80, 40), 0, 0, 360, (30, 30, 220), -1)
-    cv2.circle(photo, (100, 60), 12, (40, 200, 40), -1)
+    for du, dv in MARKS_UV:
+        cv2.circle(photo, (int(100 + du), int(60 + dv)), 8 if du else 12, (40, 200, 40), -1)
     return photo
+
+
+def green_blobs(img: np.ndarray) -> np.ndarray:
+    """Centroids (N, 2) px of the green marker blobs in an image."""
+    hsv = cv2.cvtColor(img, cv2.COLOR_BGR2HSV)
+    m = ((np.abs(hsv[..., 0].astype(int) - 60) < 12) & (hsv[..., 1] > 100)).astype(np.uint8)
+    _, _, stats, cents = cv2.connectedComponentsWithStats(m)
+    return cents[1:][stats[1:, cv2.CC_STAT_AREA] >= 4]
 
 
 def green_centroid(img: np.ndarray) -> np.ndarray:
@@ -97,10 +110,16 @@ def test_random_scene_truth_projects_onto_the_rendered_origin(seed):
     assert t["tilt_deg"] == pytest.approx(np.degrees(np.arccos(R[2, 2])))
     assert X[2] == pytest.approx(350.0 + 100 * seed)
     assert t["tilt_deg"] <= CFG.synthetic.tilt_max_deg + 1e-9
-    uv_l = project_points(X, sc.rig_true.left)
-    uv_r = project_points(sc.rig_true.R @ X + sc.rig_true.T, sc.rig_true.right)
-    assert np.linalg.norm(green_centroid(sc.left) - uv_l) < 0.6
-    assert np.linalg.norm(green_centroid(sc.right) - uv_r) < 0.6
+    # every marker lands where the truth pose and alpha project it (origin, scale, rotation, tilt)
+    a = t["alpha_px_per_mm"]
+    X_marks = np.column_stack([MARKS_UV / a, np.zeros(len(MARKS_UV))]) @ R.T + X
+    rt = sc.rig_true
+    for img, uv in ((sc.left, project_points(X_marks, rt.left)),
+                    (sc.right, project_points(X_marks @ rt.R.T + rt.T, rt.right))):
+        blobs = green_blobs(img)
+        assert len(blobs) == len(MARKS_UV)
+        err = np.linalg.norm(blobs[:, None, :] - uv[None, :, :], axis=-1).min(axis=0)
+        assert err.max() < 0.6, err
     model = build_photo_model(photo, CFG.photo_model)
     assert t["size_mm"] == pytest.approx([model.size_px[0] / t["alpha_px_per_mm"], model.size_px[1] / t["alpha_px_per_mm"]])
     # the written rig differs from the rendering rig by the configured calibration error

@@ -120,6 +120,7 @@ class BridgeModel:
         self.accepted = 0
         self.refused = 0
         self.rx_crc_errors = 0
+        self.t_tick = now  # bridge time of the last tick: when q, dq were "measured"
 
     # -- messages
     def handle(self, frame: P.Frame, now: float) -> list[P.Message]:
@@ -224,6 +225,7 @@ class BridgeModel:
     def tick(self, now: float) -> None:
         """Advance the joints by one control period T (watchdog, brake timeout, servo)."""
         T = self.T
+        self.t_tick = now
         if self.servo_on:
             silence = now - self.t_last_setpoint
             if self.q_sp is not None and silence > self.params.watchdog_periods * T:
@@ -278,9 +280,10 @@ class BridgeModel:
             s |= P.Status.TOOL1
         return s
 
-    def report(self, now: float) -> P.StateReport:
+    def report(self) -> P.StateReport:
+        """The state report for the last tick (stamped with that tick's time)."""
         return P.StateReport(
-            t_bridge_us=int(now * 1e6), t_host_echo_us=self.t_host_echo_us,
+            t_bridge_us=int(self.t_tick * 1e6), t_host_echo_us=self.t_host_echo_us,
             last_seq=self.last_seq, setpoint_seq=self.setpoint_seq or 0,
             status=int(self.status()), fault=int(self.fault),
             rx_crc_errors=self.rx_crc_errors & 0xFFFFFFFF,
@@ -513,7 +516,7 @@ class Emulator:
         master = self._master
         next_tick = time.monotonic() + T
         n_tick = 0
-        frame_len = len(P.encode(self.model.report(0.0), 0))
+        frame_len = len(P.encode(self.model.report(), 0))
         while not self._stop.is_set():
             now = time.monotonic()
             silent = self._silent.is_set()
@@ -550,7 +553,7 @@ class Emulator:
                         if len(tx_buf) + self._queued() > frame_len:
                             self.states_skipped += 1  # line still busy with the last one
                         else:
-                            self._send(self.model.report(now), now)
+                            self._send(self.model.report(), now)
                             self.states_sent += 1
                 next_tick += T
                 if now - next_tick > 5 * T:  # fell far behind (machine stalled): do not burst

@@ -278,6 +278,11 @@ class Link:
             if time.monotonic() > deadline:
                 raise LinkError(f"arm still moving {timeout:.1f} s after a stop; check the bridge")
 
+    def history(self) -> list[JointState]:
+        """The kept state reports (the last history_s seconds), oldest first."""
+        with self._cond:
+            return list(self._history)
+
     def state_at(self, t: float) -> JointState:
         """Joint state at host monotonic time `t` (s), linearly interpolated between the two
         recent states around it (positions and velocities). For the vision loop: where the
