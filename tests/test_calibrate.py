@@ -62,9 +62,12 @@ def test_renderer_agrees_with_project_points(rig, board):
 # corners are all found and refined to ~0.1 px; at this small image size the ChArUco markers are
 # ~15 px wide and only 30-45 of the 54 corners are found per view, so it is held to looser ones.
 TOLERANCE = {  # focal (relative), principal point (px), baseline (relative), rotation (deg)
-    CHESS: (0.004, 3.0, 0.003, 0.1),
-    CHARUCO: (0.01, 4.0, 0.006, 0.3),
+    CHESS: (0.004, 3.0, 0.003, 0.3),
+    CHARUCO: (0.01, 4.0, 0.006, 0.4),
 }
+# The stereo rotation error follows the principal-point error (1 px ~ 0.1 deg at f = 520 px),
+# which these views (tilts of 15-35 deg) pin down to 1-2 px: median 0.05-0.25 deg over seeds
+# in benchmarks/calibration.py.
 
 
 def check_rig(cal, rig, board):
