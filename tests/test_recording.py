@@ -395,3 +395,15 @@ def test_projected_points_and_desired_pose_are_drawn(tmp_path: Path):
     assert set(pts) == {f"/world/rig/{s}/{k}" for s in ("left", "right") for k in ("inner", "outer")}
     assert np.allclose(pts["/world/rig/left/inner"], proj.inner_left[0], atol=1e-3)   # float32
     assert len(pts["/world/rig/right/outer"]) == len(model.outer_uv)
+
+
+def test_recording_config_section(tmp_path: Path):
+    from photoservo.servo.config import load_config
+    cfg = load_config(overrides=["recording.segment_s=0.1", f"recording.dir='{tmp_path}'"]).recording
+    assert cfg.mode == "lossless"
+    with Recorder.from_config(cfg, "move") as rec:
+        rec.log_frame(0, 0.0, *frame_pair(0))
+        rec.log_frame(1, 0.2, *frame_pair(1))
+    assert [f.parent for f in rec.files] == [tmp_path, tmp_path] and rec.files[0].name.endswith("_move.seg0001.rrd")
+    with pytest.raises(InputError, match="recording.segment_s"):
+        load_config(overrides=["recording.segment_s=-1"])

@@ -22,6 +22,7 @@ from photoservo.vision.estimator import EstimatorParams
 from photoservo.vision.ga import GAParams
 from photoservo.servo.control import ServoParams
 from photoservo.servo.motion import MotionParams
+from photoservo.servo.recording import RecordingParams
 from photoservo.vision.fitness import FitnessParams
 from photoservo.vision.photo_model import PhotoModelParams
 from photoservo.vision.synthetic import SynthParams
@@ -40,6 +41,7 @@ class Config:
     link: LinkParams
     emulator: EmulatorParams
     motion: MotionParams
+    recording: RecordingParams
 
 
 def _merge(base: dict, top: dict, src: str, prefix: str = "") -> dict:

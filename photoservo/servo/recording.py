@@ -81,6 +81,7 @@ the same recording id, so the viewer opens them together as one recording, and
 from __future__ import annotations
 
 import dataclasses
+import importlib
 import io
 import json
 import logging
@@ -102,11 +103,26 @@ from typing import Any, Literal, Self
 
 import cv2
 import numpy as np
-import pyarrow as pa
-import rerun as rr
-import rerun.blueprint as rrb
 
 from photoservo.errors import InputError
+
+
+class _LazyModule:
+    """A module imported on first attribute access. `import rerun` takes 1-2 s here, and
+    servo/config.py imports this module for `RecordingParams`, which every verb loads."""
+
+    def __init__(self, name: str) -> None:
+        self._name = name
+
+    def __getattr__(self, attr: str) -> Any:
+        value = getattr(importlib.import_module(self._name), attr)
+        setattr(self, attr, value)   # later look-ups are plain attribute hits
+        return value
+
+
+rr: Any = _LazyModule("rerun")
+rrb: Any = _LazyModule("rerun.blueprint")
+pa: Any = _LazyModule("pyarrow")
 
 log = logging.getLogger(__name__)
 
@@ -339,6 +355,14 @@ class Recorder:
         except OSError as e:
             raise InputError(f"{p.parent}: cannot create the recording folder ({e.strerror})") from None
         return cls(p, verb, mode, segment_s, view, connect_url, encode_threads)
+
+    @classmethod
+    def from_config(cls, params: RecordingParams, verb: str, path: str | Path | None = None, *,
+                    view: bool = False, connect_url: str | None = None) -> Recorder:
+        """`open` with the [recording] config (mode, segment_s, dir); `path` overrides the
+        default `<dir>/<UTC time>_<verb>.rrd`."""
+        return cls.open(path, verb, mode=params.mode, segment_s=params.segment_s, view=view,
+                        connect_url=connect_url, logs_dir=params.dir)
 
     def __enter__(self) -> Self:
         return self
