@@ -407,3 +407,22 @@ def test_recording_config_section(tmp_path: Path):
     assert [f.parent for f in rec.files] == [tmp_path, tmp_path] and rec.files[0].name.endswith("_move.seg0001.rrd")
     with pytest.raises(InputError, match="recording.segment_s"):
         load_config(overrides=["recording.segment_s=-1"])
+
+
+def test_a_segment_cut_inside_a_message_is_read_up_to_its_last_complete_message(tmp_path: Path):
+    """What a SIGKILL during a write leaves: rerun refuses such a file outright; the reader
+    salvages every complete message before the cut."""
+    whole = tmp_path / "whole.rrd"
+    with Recorder.open(whole, "track") as rec:
+        rec.log_static_setup(None, None, None, CONFIG_TOML, seed=2)
+        for k in range(12):
+            rec.log_frame(k, k / 30, *frame_pair(k))
+            rec._rec.flush()                                 # one message per frame, in order
+    data = whole.read_bytes()
+    cut = segment_path(tmp_path / "cut.rrd", 1, partial=True)
+    cut.write_bytes(data[: len(data) // 2 + 7])              # mid-message
+    r = read_recording(tmp_path / "cut.rrd", images=True)
+    assert r.incomplete == [cut] and r.setup.seed == 2
+    n = len(r.images)
+    assert 3 <= n < 12 and [f.index for f in r.images] == list(range(n))
+    assert all(np.array_equal(f.left, frame_pair(f.index)[0]) for f in r.images)

@@ -23,6 +23,7 @@ import io
 import json
 import math
 import re
+import tempfile
 import warnings
 from collections.abc import Iterator
 from dataclasses import dataclass, field
@@ -186,15 +187,59 @@ def _open(path: Path) -> tuple[RrdReader, bool]:
     return reader, complete
 
 
+_CUT = re.compile(r"Message payload \(start (\d+), length \d+\) exceeds file size")
+_MESSAGE_HEADER = 16   # bytes before each message's payload in an RRD stream
+
+
+def _file_chunks(f: Path, incomplete: list[Path]) -> Iterator[tuple[str, pa.RecordBatch]]:
+    """The chunks of one file. A file cut inside a message (a hard kill during a write) makes
+    rerun refuse the whole file; it is then read from a copy that ends at the last complete
+    message (the payload offset in rerun's error minus the 16-byte message header)."""
+    path, done, tmp = f, 0, None
+    try:
+        for _ in range(4):
+            try:
+                reader, complete = _open(path)
+                if (not complete or f.stem.endswith(".partial")) and f not in incomplete:
+                    incomplete.append(f)
+                for i, chunk in enumerate(reader.stream()):
+                    if i >= done:
+                        done += 1
+                        yield chunk.entity_path.lstrip("/"), chunk.to_record_batch()
+                return
+            except RuntimeError as e:
+                m = _CUT.search(str(e))
+                if m is None:
+                    raise
+                if f not in incomplete:
+                    incomplete.append(f)
+                if tmp is None:
+                    tmp = tempfile.TemporaryDirectory(prefix="photoservo-salvage-")
+                cut = Path(tmp.name) / f"cut{_}.rrd"
+                with open(f, "rb") as src, open(cut, "wb") as dst:
+                    _copy_prefix(src, dst, int(m.group(1)) - _MESSAGE_HEADER)
+                path = cut
+        raise RuntimeError("could not find the last complete message")
+    finally:
+        if tmp is not None:
+            tmp.cleanup()
+
+
+def _copy_prefix(src: Any, dst: Any, n: int, block: int = 1 << 24) -> None:
+    while n > 0:
+        data = src.read(min(block, n))
+        if not data:
+            return
+        dst.write(data)
+        n -= len(data)
+
+
 def _chunks(files: list[Path], incomplete: list[Path]) -> Iterator[tuple[str, pa.RecordBatch]]:
-    """(entity path without the leading '/', record batch) of every chunk, file by file."""
+    """(entity path without the leading '/', record batch) of every chunk, file by file; a
+    file that cannot be read to its end is listed in `incomplete` with a warning."""
     for f in files:
         try:
-            reader, complete = _open(f)
-            if not complete or f.stem.endswith(".partial"):
-                incomplete.append(f)
-            for chunk in reader.stream():
-                yield chunk.entity_path.lstrip("/"), chunk.to_record_batch()
+            yield from _file_chunks(f, incomplete)
         except (OSError, ValueError, RuntimeError) as e:
             if f not in incomplete:
                 incomplete.append(f)
@@ -366,7 +411,8 @@ def read_recording(path: str | Path, *, images: bool = False) -> Recording:
                 and "Scalars:scalars" in rb.schema.names:
             series.setdefault(ep, []).append((t, _scalar_rows(rb)))
     if R_.E_RUN not in texts:
-        raise InputError(f"{files[0]}: not a photoservo recording (no {R_.E_RUN})")
+        why = "cut short before its setup was written" if incomplete else f"no {R_.E_RUN}"
+        raise InputError(f"{files[0]}: not a readable photoservo recording ({why})")
 
     def to_series(blocks: list[tuple[np.ndarray, np.ndarray]]) -> Series:
         t = np.concatenate([b[0] for b in blocks])
