@@ -296,7 +296,7 @@ def test_capture_on_enter_in_a_terminal_process(board_videos, tmp_path):
         [sys.executable, "-m", "photoservo.servo.cli", "calibrate", "capture", "--videos",
          str(board_videos / "l.avi"), str(board_videos / "r.avi"), "--save", str(tmp_path / "p.rrd"),
          "--out", str(out)],
-        input="\n\nq\n", capture_output=True, text=True, timeout=60)
+        input="\n\nq\n", capture_output=True, text=True, timeout=60, check=False)
     assert proc.returncode == 0, proc.stderr
     saved = sorted(p.name for p in (out / "left").iterdir()) if (out / "left").exists() else []
     assert saved == ["0000.png", "0001.png"] and "press Enter" in proc.stdout
@@ -317,3 +317,90 @@ def test_board_image_is_detectable(tmp_path, capsys):
 
     det = detect_board(cv2.imread(str(out)), CHARUCO)
     assert det is not None and len(det) == CHARUCO.n_corners
+
+
+# ----------------------------------------------------------------------------- configured cameras and the arm
+
+
+def test_capture_from_configured_cameras(board_videos, tmp_path, capsys):
+    out = tmp_path / "cap"
+    code, _text, err = run_cli(["calibrate", "capture", "--set", "cameras.kind=videos",
+                               "--set", f"cameras.left={board_videos / 'l.avi'}",
+                               "--set", f"cameras.right={board_videos / 'r.avi'}",
+                               "--interval", "0.05", "--count", "2", "--save", str(tmp_path / "p.rrd"),
+                               "--out", str(out)], capsys)
+    assert code == 0, err
+    assert sorted(p.name for p in (out / "left").iterdir()) == ["0000.png", "0001.png"]
+
+
+def test_capture_without_cameras_is_one_line(tmp_path, capsys):
+    code, _, err = run_cli(["calibrate", "capture", "--out", str(tmp_path / "c")], capsys)
+    assert_one_line_error(code, err, "no cameras: give --devices, --side-by-side, --videos or --folders")
+    code, _, err = run_cli(["calibrate", "capture", "--set", "cameras.kind=videos", "--out", str(tmp_path / "c")],
+                           capsys)
+    assert_one_line_error(code, err, "config key 'cameras.left': must name a device")
+
+
+def _emulator(q0):
+    from photoservo.robot.emulator import Emulator, EmulatorParams
+    from photoservo.tomlconf import build_dataclass, configs_dir, read_toml
+
+    params = build_dataclass(EmulatorParams, read_toml(configs_dir() / "default.toml")["emulator"], "emulator")
+    return Emulator(params, q0=q0)
+
+
+Q_LOOK_DOWN = np.radians([0.0, 40.0, 0.0, 80.0, 0.0, 60.0, 0.0])  # flange roughly facing down
+
+
+def test_capture_logs_flange_pose_from_the_arm(board_videos, tmp_path, capsys):
+    """The controller emulator on a real pty, read through the real link: each saved pair gets
+    the flange pose (forward kinematics of the joint state at its capture time)."""
+    from photoservo.robot.pa10 import fk
+
+    out = tmp_path / "cap"
+    with _emulator(Q_LOOK_DOWN) as emu:
+        code, _text, err = run_cli(["calibrate", "capture", "--videos", str(board_videos / "l.avi"),
+                                   str(board_videos / "r.avi"), "--port", emu.path, "--interval", "0.05",
+                                   "--count", "2", "--save", str(tmp_path / "p.rrd"), "--out", str(out)], capsys)
+    assert code == 0, err
+    poses = read_flange_poses(out / "poses.csv")
+    assert list(poses) == ["0000", "0001"]
+    for T in poses.values():
+        assert np.allclose(T, fk(Q_LOOK_DOWN), atol=1e-3)
+
+
+def test_water_live_from_cameras_and_arm(tmp_path, capsys):
+    """`calibrate water --live`: a board floating at z = -380 mm under the arm's cameras (videos
+    rendered from the flange pose of the emulated arm), the pose read through the link."""
+    from photoservo.robot.pa10 import fk
+
+    water_z = -380.0
+    rig_t, X = true_rig(), true_hand_eye()
+    T_base_left = fk(Q_LOOK_DOWN) @ X
+    # the board lies on the water, below the left camera, centred on its optical axis
+    axis = T_base_left[:3, 2]
+    hit = T_base_left[:3, 3] + axis * (water_z - T_base_left[2, 3]) / axis[2]
+    R_board = make_T(cv2.Rodrigues(np.array([0.0, 0.0, 0.3]))[0], np.zeros(3))[:3, :3] @ np.diag([1.0, -1.0, -1.0])
+    T_bb = make_T(R_board, hit - R_board @ np.array([125.0, 87.5, 0.0]))
+    T_lb = np.linalg.inv(T_base_left) @ T_bb
+    T_rb = make_T(rig_t.R, rig_t.T) @ T_lb
+    assert 300 < T_lb[2, 3] < 900, "the scene must put the board in front of the camera"
+    for side, cam, T in (("l", rig_t.left, T_lb), ("r", rig_t.right, T_rb)):
+        img = renderer(CHARUCO, cam).render(T[:3, :3], T[:3, 3], noise_sigma=1.0)
+        write_video(tmp_path / f"{side}.avi", [img] * 4)
+    rig = rig_file(tmp_path, hand_eye=(X[:3, :3], X[:3, 3]))
+    with _emulator(Q_LOOK_DOWN) as emu:
+        code, text, err = run_cli(["calibrate", "water", "--rig", str(rig), "--live", "--port", emu.path,
+                                   "--videos", str(tmp_path / "l.avi"), str(tmp_path / "r.avi"), "--frames", "2",
+                                   *BOARD_ARGS, "--charuco"], capsys)
+    assert code == 0, err
+    assert "(triangulated)" in text
+    z = float(text.split("water_z_mm = ")[1].split()[0])
+    assert z == pytest.approx(water_z, abs=3.0)
+
+
+def test_water_needs_views_or_live(tmp_path, capsys):
+    X = true_hand_eye()
+    code, _, err = run_cli(["calibrate", "water", "--rig", str(rig_file(tmp_path, hand_eye=(X[:3, :3], X[:3, 3]))),
+                            *BOARD_ARGS], capsys)
+    assert_one_line_error(code, err, "give either --views DIR (saved views) or --live")

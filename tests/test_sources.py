@@ -200,3 +200,38 @@ def test_missing_device_is_input_error_naming_it(tmp_path):
 def test_config_validation_names_the_field(tmp_path, build, message):
     with pytest.raises(InputError, match=message):
         build(tmp_path)
+
+
+def cameras(**kw):
+    from photoservo.vision.sources import CamerasParams
+
+    base = {"kind": "none", "left": "", "right": "", "width": 0, "height": 0, "fps": 0.0, "fourcc": "", "exposure": 0.0,
+                "white_balance_k": 0.0, "max_skew_ms": 5.0, "timeout_s": 1.0, "realtime": True}
+    base.update(kw)
+    return CamerasParams(**base)
+
+
+def test_cameras_section_maps_to_source_configs(tmp_path):
+    from photoservo.vision.sources import source_config
+
+    assert source_config(cameras()) is None
+    c = source_config(cameras(kind="devices", left="0", right="/dev/video2", width=640, height=480,
+                              fourcc="MJPG", exposure=120.0, max_skew_ms=3.0))
+    assert c == OpenCVPairConfig(0, "/dev/video2", width=640, height=480, fourcc="MJPG", exposure=120.0,
+                                 max_skew_s=0.003)
+    sbs = source_config(cameras(kind="side_by_side", left="1", width=640, white_balance_k=4500.0))
+    assert sbs == SideBySideConfig(1, width=1280, white_balance_k=4500.0)
+    left = write_video(tmp_path / "l.avi", 2, 10.0, 0)
+    right = write_video(tmp_path / "r.avi", 2, 10.0, 1)
+    assert source_config(cameras(kind="videos", left=left, right=right, realtime=False)) == VideoPairConfig(left, right)
+
+
+def test_cameras_section_errors_name_the_key(tmp_path):
+    from photoservo.vision.sources import source_config
+
+    with pytest.raises(InputError, match="config key 'cameras.right'"):
+        cameras(kind="videos", left="a.avi").validate("cameras")
+    with pytest.raises(InputError, match="config key 'cameras.max_skew_ms'"):
+        cameras(max_skew_ms=-1.0).validate("cameras")
+    with pytest.raises(InputError, match=r"\[cameras\] \(videos\): left: video file not found"):
+        source_config(cameras(kind="videos", left=str(tmp_path / "x.avi"), right=str(tmp_path / "y.avi")))

@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import argparse
 import csv
+import dataclasses
 import math
 import re
 import sys
@@ -33,6 +34,8 @@ import numpy as np
 
 from photoservo.errors import InputError
 from photoservo.fileio import read_image, write_image_atomic, write_text_atomic
+from photoservo.servo.cmd_config import add_config_options
+from photoservo.servo.config import load_config
 from photoservo.vision.board import (
     DEFAULT_DICTIONARY,
     Board,
@@ -55,12 +58,10 @@ from photoservo.vision.calibrate import (
 from photoservo.vision.rig import Rig, load_rig, save_rig
 from photoservo.vision.sources import (
     IMAGE_SUFFIXES,
-    ImageFolderConfig,
-    OpenCVPairConfig,
-    SideBySideConfig,
+    CamerasParams,
     SourceConfig,
-    VideoPairConfig,
     make_source,
+    source_config,
 )
 
 POSE_COLUMNS = ("x_mm", "y_mm", "z_mm", "rx_rad", "ry_rad", "rz_rad")
@@ -79,6 +80,43 @@ def _board_options(p: argparse.ArgumentParser) -> None:
                    help="ChArUco marker side (mm); default 0.7 x square")
     p.add_argument("--dict", default=DEFAULT_DICTIONARY, metavar="NAME",
                    help=f"ChArUco ArUco dictionary (default {DEFAULT_DICTIONARY}; also finds DICT_4X4_50/100 boards)")
+
+
+def _source_options(p: argparse.ArgumentParser) -> None:
+    """Stereo source flags; each overrides its key of the config's [cameras] section."""
+    src = p.add_mutually_exclusive_group()
+    src.add_argument("--devices", nargs=2, metavar=("LEFT", "RIGHT"), help="two OpenCV devices: index or path")
+    src.add_argument("--side-by-side", metavar="DEVICE", help="one device with left|right halves")
+    src.add_argument("--videos", nargs=2, metavar=("LEFT", "RIGHT"), help="two video files")
+    src.add_argument("--folders", nargs=2, metavar=("LEFT", "RIGHT"), help="two image folders")
+    p.add_argument("--width", type=int, help="capture width (px per camera; 0 = device default)")
+    p.add_argument("--height", type=int)
+    p.add_argument("--fps", type=float)
+    p.add_argument("--fourcc", help="e.g. MJPG")
+    p.add_argument("--exposure", type=float, help="lock exposure (device units; 0 = automatic)")
+    p.add_argument("--white-balance-k", type=float, help="lock white balance (K; 0 = automatic)")
+    p.add_argument("--max-skew-ms", type=float, help="drop pairs whose left/right times differ more")
+
+
+def _cameras(args: argparse.Namespace, cams: CamerasParams) -> SourceConfig:
+    """[cameras] with the command line's source flags on top -> the source's config."""
+    kind = {"devices": "devices", "side_by_side": "side_by_side", "videos": "videos", "folders": "folders"}
+    changes: dict = {}
+    for flag, k in kind.items():
+        v = getattr(args, flag)
+        if v:
+            left, right = (v, "") if isinstance(v, str) else v
+            changes.update(kind=k, left=left, right=right, realtime=True)
+    for k in ("width", "height", "fps", "fourcc", "exposure", "white_balance_k", "max_skew_ms"):
+        if getattr(args, k) is not None:
+            changes[k] = getattr(args, k)
+    cams = dataclasses.replace(cams, **changes)
+    cams.validate("cameras")
+    cfg = source_config(cams)
+    if cfg is None:
+        raise InputError("no cameras: give --devices, --side-by-side, --videos or --folders, "
+                         "or set [cameras] kind in the config")
+    return cfg
 
 
 def _board(args: argparse.Namespace) -> Board:
@@ -121,8 +159,16 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                                    "rig (with [hand_eye]) from known flange poses. One view of one board is "
                                    "enough; several boards spread out give the tilt too.")
     w.add_argument("--rig", required=True, metavar="RIG.toml")
-    w.add_argument("--views", required=True, metavar="DIR", help="DIR/left (+ DIR/right) images, or DIR")
+    w.add_argument("--views", metavar="DIR", help="DIR/left (+ DIR/right) images, or DIR")
     w.add_argument("--poses", metavar="POSES.csv", help="flange poses (default DIR/poses.csv)")
+    w.add_argument("--live", action="store_true",
+                   help="measure now: read pairs from the cameras ([cameras] or the source flags) and the "
+                        "flange pose from the arm (--port) instead of --views")
+    w.add_argument("--frames", type=int, default=5, metavar="N",
+                   help="--live: pairs with the board found to use (default 5)")
+    w.add_argument("--port", help="--live: serial port of the arm's bridge")
+    _source_options(w)
+    add_config_options(w)
     _board_options(w)
     w.add_argument("--update", metavar="CFG.toml", help="write the height into this config file")
     w.add_argument("--key", default="world.water_z_mm", metavar="SECTION.KEY",
@@ -133,18 +179,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                                    "on Enter ('q' + Enter ends), with a live preview in Rerun (corners "
                                    "drawn when --board is given). With --port, the flange pose at each "
                                    "pair's capture time goes to OUT/poses.csv.")
-    src = c.add_mutually_exclusive_group(required=True)
-    src.add_argument("--devices", nargs=2, metavar=("LEFT", "RIGHT"), help="two OpenCV devices: index or path")
-    src.add_argument("--side-by-side", metavar="DEVICE", help="one device with left|right halves")
-    src.add_argument("--videos", nargs=2, metavar=("LEFT", "RIGHT"), help="two video files")
-    src.add_argument("--folders", nargs=2, metavar=("LEFT", "RIGHT"), help="two image folders")
-    c.add_argument("--width", type=int, default=0, help="capture width (px per camera; 0 = device default)")
-    c.add_argument("--height", type=int, default=0)
-    c.add_argument("--fps", type=float, default=0.0)
-    c.add_argument("--fourcc", default="", help="e.g. MJPG")
-    c.add_argument("--exposure", type=float, default=None, help="lock exposure (device units)")
-    c.add_argument("--white-balance-k", type=float, default=None, help="lock white balance (K)")
-    c.add_argument("--max-skew-ms", type=float, default=5.0, help="drop pairs whose left/right times differ more")
+    _source_options(c)
     c.add_argument("--out", required=True, metavar="DIR", help="writes DIR/left, DIR/right, DIR/capture.csv")
     c.add_argument("--interval", type=float, default=0.0, metavar="S", help="save every S seconds (0: on Enter)")
     c.add_argument("--count", type=int, default=0, metavar="N", help="stop after N pairs (0: until q / end)")
@@ -155,7 +190,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     c.add_argument("--dict", default=DEFAULT_DICTIONARY)
     c.add_argument("--require-board", action="store_true", help="save only pairs with the board in both images")
     c.add_argument("--port", help="serial port of the arm's bridge: log the flange pose of each pair")
-    c.add_argument("--config", metavar="CFG.toml", help="config for the [link] settings")
+    add_config_options(c)
     view = c.add_mutually_exclusive_group()
     view.add_argument("--spawn", action="store_true", help="spawn a Rerun viewer for the preview")
     view.add_argument("--connect", metavar="URL", help="stream the preview to a running viewer")
@@ -267,6 +302,40 @@ def _posed_views(args: argparse.Namespace, rig: Rig, board: Board, want_right: b
         dl = detect_board(_read_sized(left[name], rig.left.size, "left image"), board)
         dr = detect_board(_read_sized(right[name], rig.right.size, "right image"), board) if name in right else None
         out.append((name, T, dl, dr))
+    return out
+
+
+def _live_views(args: argparse.Namespace, rig: Rig, board: Board
+                ) -> list[tuple[str, np.ndarray, BoardDetection | None, BoardDetection | None]]:
+    """`--frames` pairs with the board in the left image, each with the flange pose at its
+    capture time from the arm's link (forward kinematics of the interpolated joint state)."""
+    from photoservo.robot.link import Link
+    from photoservo.robot.pa10 import fk
+
+    if not args.port:
+        raise InputError("--live needs --port (the arm's bridge) for the flange pose")
+    if args.frames < 1:
+        raise InputError(f"--frames must be >= 1, got {args.frames}")
+    config = load_config(args.config, args.overrides)
+    source = make_source(_cameras(args, config.cameras))
+    out: list = []
+    with Link(args.port, config.link) as link, source:
+        for frame in source:
+            if (frame.left.shape[1], frame.left.shape[0]) != tuple(rig.left.size):
+                raise InputError(f"camera image is {frame.left.shape[1]}x{frame.left.shape[0]}, the rig's left "
+                                 f"camera is {rig.left.size[0]}x{rig.left.size[1]}")
+            dl = detect_board(frame.left, board)
+            if dl is None:
+                continue
+            try:
+                q = link.state_at(frame.t).q
+            except LookupError:
+                continue
+            out.append((f"frame {frame.index}", np.asarray(fk(q), dtype=np.float64), dl,
+                        detect_board(frame.right, board)))
+            if len(out) >= args.frames:
+                break
+        print(f"  {source.stats.summary()}")
     return out
 
 
@@ -420,8 +489,11 @@ def run_water(args: argparse.Namespace) -> int:
         raise InputError(f"{args.rig}: no [hand_eye] table; run `photoservo calibrate hand-eye` first")
     board = _board(args)
     T_flange_left = rig.T_flange_left()
+    if args.live == bool(args.views):
+        raise InputError("give either --views DIR (saved views) or --live (cameras and arm now)")
+    views = _live_views(args, rig, board) if args.live else _posed_views(args, rig, board, want_right=True)
     points = []
-    for name, T_bf, dl, dr in _posed_views(args, rig, board, want_right=True):
+    for name, T_bf, dl, dr in views:
         P = board_points_left(dl, dr, board, rig)
         if len(P) == 0:
             print(f"  {name}: skipped, board not found in the left image")
@@ -454,21 +526,6 @@ def run_water(args: argparse.Namespace) -> int:
 
 
 # ----------------------------------------------------------------------------- capture
-
-
-def _source_config(args: argparse.Namespace) -> SourceConfig:
-    skew = args.max_skew_ms / 1000.0
-    cam = {"fps": args.fps, "fourcc": args.fourcc, "exposure": args.exposure, "white_balance_k": args.white_balance_k,
-               "max_skew_s": skew}
-    if args.devices:
-        l, r = (int(d) if d.isdigit() else d for d in args.devices)
-        return OpenCVPairConfig(l, r, width=args.width, height=args.height, **cam)
-    if args.side_by_side:
-        d = args.side_by_side
-        return SideBySideConfig(int(d) if d.isdigit() else d, width=2 * args.width, height=args.height, **cam)
-    if args.videos:
-        return VideoPairConfig(args.videos[0], args.videos[1], realtime=True, max_skew_s=skew)
-    return ImageFolderConfig(args.folders[0], args.folders[1], fps=args.fps, max_skew_s=skew)
 
 
 class _EnterKey:
@@ -506,15 +563,14 @@ def run_capture(args: argparse.Namespace) -> int:
     if args.require_board and board is None:
         raise InputError("--require-board needs --board")
     out = Path(args.out)
-    cfg = _source_config(args)
+    config = load_config(args.config, args.overrides)
+    source = make_source(_cameras(args, config.cameras))
     link = None
     if args.port:
         from photoservo.robot.link import Link
         from photoservo.robot.pa10 import fk
-        from photoservo.servo.config import load_config
 
-        link = Link(args.port, load_config(args.config).link)
-    source = make_source(cfg)
+        link = Link(args.port, config.link)
     rows, poses = [], []
     saved = 0
     enter = None if args.interval > 0 else _EnterKey()

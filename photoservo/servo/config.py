@@ -25,6 +25,7 @@ from photoservo.servo.motion import MotionParams
 from photoservo.servo.recording import RecordingParams
 from photoservo.vision.fitness import FitnessParams
 from photoservo.vision.photo_model import PhotoModelParams
+from photoservo.vision.sources import CamerasParams
 from photoservo.vision.synthetic import SynthParams
 
 
@@ -41,6 +42,7 @@ class Config:
     link: LinkParams
     emulator: EmulatorParams
     motion: MotionParams
+    cameras: CamerasParams
     recording: RecordingParams
 
 

@@ -23,7 +23,7 @@ from abc import ABC, abstractmethod
 from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Self
+from typing import Literal, Self
 
 import cv2
 import numpy as np
@@ -215,6 +215,67 @@ class ImageFolderConfig:
 
 
 SourceConfig = OpenCVPairConfig | SideBySideConfig | VideoPairConfig | ImageFolderConfig
+
+
+@dataclass(frozen=True)
+class CamerasParams:
+    """[cameras] config section: the stereo source `track` and `calibrate capture` use
+    (configs/default.toml documents each key). `source_config()` turns it into the config of
+    one source kind, where the per-kind checks run."""
+
+    kind: Literal["none", "devices", "side_by_side", "videos", "folders"]
+    left: str  # device index ("0"), device path, video file or image folder
+    right: str  # the same for the right camera ("" for side_by_side)
+    width: int  # px per camera; 0 = device default
+    height: int  # px; 0 = device default
+    fps: float  # devices: requested rate; folders: pacing; 0 = default / unpaced
+    fourcc: str  # e.g. "MJPG"; "" = device default
+    exposure: float  # device units; 0 = automatic
+    white_balance_k: float  # kelvin; 0 = automatic
+    max_skew_ms: float  # pairs whose left/right capture times differ more are dropped
+    timeout_s: float  # a read that gets no good pair for this long returns None (counted)
+    realtime: bool  # videos: deliver frames at their file times (false: as fast as read)
+
+    def validate(self, where: str) -> None:
+        w = f"{where}." if where else ""
+        if self.kind != "none" and not self.left:
+            raise InputError(f"config key '{w}left': must name a device, file or folder for kind '{self.kind}'")
+        if self.kind in ("devices", "videos", "folders") and not self.right:
+            raise InputError(f"config key '{w}right': must name a device, file or folder for kind '{self.kind}'")
+        for k in ("width", "height", "fps", "exposure", "white_balance_k", "max_skew_ms"):
+            if getattr(self, k) < 0:
+                raise InputError(f"config key '{w}{k}': must be >= 0, got {getattr(self, k)}")
+        if self.timeout_s <= 0:
+            raise InputError(f"config key '{w}timeout_s': must be > 0, got {self.timeout_s}")
+
+
+def _device(text: str) -> int | str:
+    return int(text) if text.isdigit() else text
+
+
+def source_config(p: CamerasParams) -> SourceConfig | None:
+    """The source config for a [cameras] section; None for kind 'none'.
+
+    Raises:
+        InputError: a per-kind check failed (the message names the field).
+    """
+    skew, lock = p.max_skew_ms / 1000.0, {
+        "fps": p.fps, "fourcc": p.fourcc, "exposure": p.exposure or None,
+        "white_balance_k": p.white_balance_k or None}
+    try:
+        if p.kind == "devices":
+            return OpenCVPairConfig(_device(p.left), _device(p.right), width=p.width, height=p.height,
+                                    max_skew_s=skew, timeout_s=p.timeout_s, **lock)
+        if p.kind == "side_by_side":
+            return SideBySideConfig(_device(p.left), width=2 * p.width, height=p.height, max_skew_s=skew,
+                                    timeout_s=p.timeout_s, **lock)
+        if p.kind == "videos":
+            return VideoPairConfig(p.left, p.right, realtime=p.realtime, max_skew_s=skew, timeout_s=p.timeout_s)
+        if p.kind == "folders":
+            return ImageFolderConfig(p.left, p.right, fps=p.fps, max_skew_s=skew, timeout_s=p.timeout_s)
+    except InputError as e:
+        raise InputError(f"[cameras] ({p.kind}): {e}") from None
+    return None
 
 
 # ----------------------------------------------------------------------------- the interface
@@ -578,8 +639,8 @@ def make_source(config: SourceConfig) -> StereoSource:
 
 
 __all__ = [
-    "EndOfStream", "ImageFolderConfig", "ImageFolderSource", "OpenCVPairConfig", "OpenCVPairSource",
+    "CamerasParams", "EndOfStream", "ImageFolderConfig", "ImageFolderSource", "OpenCVPairConfig", "OpenCVPairSource",
     "SideBySideConfig", "SideBySideSource", "SourceConfig", "SourceNotConnectedError", "SourceStats",
     "StereoFrame", "StereoSource", "VideoPairConfig", "VideoPairSource", "make_source",
-    "split_side_by_side",
+    "source_config", "split_side_by_side",
 ]
