@@ -3,6 +3,7 @@ tool-speed cap, override, controlled stop; always from the measured state."""
 
 import dataclasses
 import doctest
+import functools
 import math
 
 import numpy as np
@@ -159,6 +160,11 @@ def test_velocity_interface_follows_target_from_measured_state():
     q_meas = sps[-1].q - 0.05
     sp = m.velocity_step(q_meas, sps[-1].dq, dq_t)
     assert np.all(np.abs(sp.q - q_meas) <= LIM.dq_max * m.dt + 1e-12)
+    assert sp.reason.startswith("re-planned from the measured state (")
+    # ... while an arm within track_tolerance_deg of a recent setpoint is following the plan
+    sp2 = m.velocity_step(sp.q - math.radians(0.3), sp.dq, dq_t)
+    assert sp2.reason == ""
+    np.testing.assert_allclose(sp2.q, sp.q + sp.dq * m.dt, atol=1e-12)
 
 
 def test_tool_speed_cap_in_both_interfaces():
@@ -260,3 +266,53 @@ def test_keepout_point_jacobians_match_finite_differences():
         Pm = np.array(list(m.keepout_points(q - e).values()))
         np.testing.assert_allclose(J[:, :, i], (Pp - Pm) / (2 * h), atol=1e-4)
     assert names == list(m.keepout_points(q))
+
+
+def test_random_mode_switches_never_break_limits_ranges_or_keepout():
+    # Seeded stress: moves to random (valid) targets, random velocity targets, stops and override
+    # changes, switched at random, on a perfect arm. Every setpoint stays within the speed,
+    # acceleration and jerk limits, the joint ranges less half the margin and the keep-out.
+    rng = np.random.default_rng(7)
+    params = dataclasses.replace(PARAMS, z_min_mm=0.0)
+    m = Motion(params, LIM)
+    q, dq = HOME_Q.copy(), np.zeros(7)
+    sps = []
+    for _ in range(12):
+        mode = rng.integers(4)
+        if mode == 0:
+            target = np.clip(q + rng.normal(0, 0.4, 7), m.q_lo_target, m.q_hi_target)
+            step = functools.partial(m.move_step, q_target=target)
+        elif mode == 1:
+            v = rng.uniform(-1, 1, 7) * LIM.dq_max
+            step = functools.partial(m.velocity_step, dq_target=v)
+        elif mode == 2:
+            step = m.stop_step
+        else:
+            m.speed_override_pct = float(rng.uniform(0, 100))
+            continue
+        for _ in range(int(rng.integers(20, 200))):
+            sp = step(q, dq)
+            sps.append(sp)
+            q, dq = sp.q, sp.dq
+    assert_within_limits(m, sps)
+    Q = np.array([s.q for s in sps])
+    assert np.all(Q >= m.q_lo_safe - 1e-9) and np.all(Q <= m.q_hi_safe + 1e-9)
+    assert m.keepout_violation(Q) == ""
+
+
+def test_lagging_arm_reaches_the_target_and_settles():
+    # The measured state trails the setpoint by one period (a real arm and line are late); the
+    # steps start from what is measured and still converge.
+    m = Motion(PARAMS, LIM)
+    target = HOME_Q + np.radians([10, -5, 8, 6, -12, 9, 20])
+    prev = cur = None
+    q, dq = HOME_Q.copy(), np.zeros(7)
+    for _ in range(3000):
+        sp = m.move_step(q, dq, target)
+        prev, cur = cur, sp
+        if prev is not None:
+            q, dq = prev.q, prev.dq
+        if m.done:
+            break
+    assert m.done
+    np.testing.assert_allclose(q, target, atol=math.radians(PARAMS.position_tolerance_deg))

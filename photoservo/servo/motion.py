@@ -1,13 +1,21 @@
 """Jerk-limited joint motion for the PA-10 with Ruckig (method step 6: "joint motion is made
 jerk-limited with Ruckig and streamed to the arm's controller").
 
-One step per control period (default 250 Hz), ALWAYS starting from the measured joint state:
+One step per control period (default 250 Hz), starting from the measured joint state:
 
     inp.current_position, inp.current_velocity = q_meas, dq_meas
     otg.update(inp, out)  ->  Setpoint(out.new_position, out.new_velocity, out.new_acceleration)
 
-The arm does not report acceleration, so the current acceleration is the one we last told it
-(zero at the start). Pure code: arrays in, setpoints out, no I/O and no clock.
+The measured state is late (the line, the bridge's control period), so re-planning every step
+from it closes a loop with a delay around a time-optimal controller, which limit-cycles around
+the target (tests/test_motion.py::test_lagging_arm_reaches_the_target_and_settles). So each step
+first compares the measured joints with the setpoints of the last `track_window_s`: when one of
+them is within `track_tolerance_deg` on every joint, the arm is following the plan and the step
+continues from the last setpoint (Ruckig's pass_to_input); otherwise the step starts from the
+measured state (and says so in `reason`): at the first step, after a fault, when the arm lags or
+was pushed. `track_tolerance_deg = 0` re-plans from the measured state at every step. The arm
+does not report acceleration: a re-plan starts from the last commanded one. Pure code: arrays
+in, setpoints out, no I/O and no clock.
 
 Ruckig's free edition ignores position limits, so the safety layer is ours. Each step, on top
 of the plain Ruckig step:
@@ -35,6 +43,7 @@ Frames and units: joint angles in rad, base frame in mm (z up), time in s.
 from __future__ import annotations
 
 import math
+from collections import deque
 from dataclasses import dataclass
 
 import numpy as np
@@ -44,6 +53,8 @@ from ruckig import (
     OutputParameter,
     Result,
     Ruckig,
+    RuckigError,
+    Synchronization,
     Trajectory,
 )
 
@@ -76,6 +87,8 @@ class MotionParams:
     workspace_max_mm: tuple[float, float, float]  # workspace box, upper corner (base frame, mm)
     tool_speed_max_mm_s: float  # cap on the tool point's speed (mm/s)
     tool_offset_mm: tuple[float, float, float]  # tool point in the flange frame (mm)
+    track_tolerance_deg: float  # measured joints this close to a recent setpoint = following the plan
+    track_window_s: float  # how far back "recent" reaches: the state's expected lateness (s)
 
     def validate(self, where: str) -> None:
         def bad(key: str, why: str) -> InputError:
@@ -91,6 +104,10 @@ class MotionParams:
             raise bad("position_tolerance_deg", "must be > 0")
         if not self.tool_speed_max_mm_s > 0:
             raise bad("tool_speed_max_mm_s", "must be > 0")
+        if not self.track_tolerance_deg >= 0:
+            raise bad("track_tolerance_deg", "must be >= 0")
+        if not self.track_window_s > 0:
+            raise bad("track_window_s", "must be > 0")
         for i in range(3):
             if not self.workspace_min_mm[i] < self.workspace_max_mm[i]:
                 raise bad("workspace_max_mm", f"must exceed workspace_min_mm on axis {'xyz'[i]}")
@@ -163,6 +180,7 @@ class Motion:
         self._brake_inp.max_jerk = limits.dddq_max
         self._brake_inp.target_velocity = np.zeros(N_JOINTS)
         self._brake_inp.target_acceleration = np.zeros(N_JOINTS)
+        self._brake_inp.synchronization = Synchronization.No  # as stop_step brakes
         self._traj = Trajectory(N_JOINTS)
         # nominal Cartesian deceleration / jerk for the keep-out approach caps: what the weakest
         # joint gives at a 500 mm lever (mm/s², mm/s³)
@@ -172,6 +190,7 @@ class Motion:
         self._chain_mm = np.cumsum(DH_D_MM[::-1])[::-1] + float(np.linalg.norm(self.T_flange_tool[:3, 3]))
         self._override = params.speed_override_pct / 100.0
         self._last: Setpoint | None = None
+        self._history: deque[np.ndarray] = deque(maxlen=max(1, round(params.track_window_s * params.rate_hz)))
         self._target: np.ndarray | None = None
         self._refused: str = ""
         self._time_scale = 1.0
@@ -245,7 +264,8 @@ class Motion:
         dq (rad/s). A target outside the ranges/keep-out is refused: the arm stops and `reason`
         says why. `done` becomes True once every joint is within position_tolerance_deg, at rest."""
         q_target = np.asarray(q_target, dtype=float)
-        q_meas, dq_meas = np.asarray(q_meas, float), np.asarray(dq_meas, float)
+        q_arm = np.asarray(q_meas, float)
+        q_meas, dq_meas, note = self._seed(q_meas, dq_meas)
         if self._target is None or not np.array_equal(q_target, self._target):
             self._adopt(q_meas, dq_meas, q_target)
         if self._refused:
@@ -259,7 +279,7 @@ class Motion:
         inp.target_position = q_target
         inp.target_velocity = np.zeros(N_JOINTS)
         inp.target_acceleration = np.zeros(N_JOINTS)
-        reasons = []
+        reasons = [note] if note else []
         v_cap_lo, v_cap_hi = self._range_caps(q_meas)
         sp = None
         for _ in range(3):
@@ -269,7 +289,7 @@ class Motion:
             inp.min_velocity = -np.maximum(np.minimum(v, v_cap_lo), 1e-6)
             inp.max_acceleration = self.limits.ddq_max * s * s
             inp.max_jerk = self.limits.dddq_max * s**3
-            result = self.otg.update(inp, self.out)
+            result = self._update(inp)
             if result not in (Result.Working, Result.Finished):
                 return self.stop_step(q_meas, dq_meas, reason=f"Ruckig refused the move ({result})")
             sp = self._from_out()
@@ -279,11 +299,12 @@ class Motion:
             self._time_scale *= self.params.tool_speed_max_mm_s / speed
             reasons.append("tool speed cap")
         v = self._override * self.limits.dq_max * self._time_scale
-        slowed = ((v_cap_hi < v) & (sp.dq > 0)) | ((v_cap_lo < v) & (sp.dq < 0))
+        slowed = (((v_cap_hi < v) & (sp.dq >= 0.98 * v_cap_hi) & (sp.dq > 0))
+                  | ((v_cap_lo < v) & (-sp.dq >= 0.98 * v_cap_lo) & (sp.dq < 0)))
         if slowed.any():
             reasons.append("joint range: slowing " + ", ".join(np.array(JOINT_NAMES)[slowed]))
         checked = self._accept(q_meas, dq_meas, sp, reasons)
-        err = np.abs(q_meas - q_target)
+        err = np.abs(q_arm - q_target)
         self.done = bool(result == Result.Finished and np.all(err <= math.radians(self.params.position_tolerance_deg))
                          and not checked.reason.startswith("braking"))
         return checked
@@ -293,7 +314,7 @@ class Motion:
         law's DLS solve, from the measured q (rad) and dq (rad/s). The target is clamped to the
         overridden speed limits, the joint-range caps and the tool-speed cap before Ruckig
         reaches it jerk-limited."""
-        q_meas, dq_meas = np.asarray(q_meas, float), np.asarray(dq_meas, float)
+        q_meas, dq_meas, note = self._seed(q_meas, dq_meas)
         self._target = None
         self.done = False
         if self._override <= 0.0:
@@ -301,7 +322,7 @@ class Motion:
         dq_t = np.asarray(dq_target, dtype=float).copy()
         if dq_t.shape != (N_JOINTS,) or not np.all(np.isfinite(dq_t)):
             return self.stop_step(q_meas, dq_meas, reason="velocity target is not 7 finite numbers")
-        reasons = []
+        reasons = [note] if note else []
         v = self._override * self.limits.dq_max
         m = float(np.max(np.abs(dq_t) / v))
         if m > 1.0:
@@ -328,7 +349,7 @@ class Motion:
         inp.max_velocity = self.limits.dq_max
         inp.max_acceleration = self.limits.ddq_max
         inp.max_jerk = self.limits.dddq_max
-        result = self.otg.update(inp, self.out)
+        result = self._update(inp)
         if result not in (Result.Working, Result.Finished):
             sp = self.stop_step(q_meas, dq_meas, reason=f"Ruckig refused the velocity target ({result})")
         else:
@@ -339,30 +360,72 @@ class Motion:
     def stop_step(self, q_meas: np.ndarray, dq_meas: np.ndarray, reason: str = "") -> Setpoint:
         """One period of a controlled stop: velocity brought to zero with the full acceleration
         and jerk limits, from the measured state. `done` is True once at rest."""
-        inp = self._current(np.asarray(q_meas, float), np.asarray(dq_meas, float))
+        q_meas, dq_meas, note = self._seed(q_meas, dq_meas)
+        reason = reason or note
+        inp = self._current(q_meas, dq_meas)
         inp.control_interface = ControlInterface.Velocity
         inp.target_velocity = np.zeros(N_JOINTS)
         inp.target_acceleration = np.zeros(N_JOINTS)
         inp.max_velocity = self.limits.dq_max
         inp.max_acceleration = self.limits.ddq_max
         inp.max_jerk = self.limits.dddq_max
-        result = self.otg.update(inp, self.out)
+        inp.synchronization = Synchronization.No  # each joint stops as fast as it can
+        result = self._update(inp)
         if result not in (Result.Working, Result.Finished):
             raise RuntimeError(f"Ruckig cannot plan a controlled stop ({result}); emergency-stop the arm")
         sp = self._from_out(reason)
-        self._last = sp
+        self._emit(sp)
         self.done = result == Result.Finished
         return sp
 
     # -------------------------------------------------------------------------------- internals
 
+    def _seed(self, q_meas, dq_meas) -> tuple[np.ndarray, np.ndarray, str]:
+        """The state a step starts from: the last setpoint while the measured joints are within
+        track_tolerance_deg of one of the setpoints of the last track_window_s (the arm follows,
+        its report is just late), else the measured state, with a note saying why."""
+        q_meas, dq_meas = np.asarray(q_meas, float), np.asarray(dq_meas, float)
+        tol = math.radians(self.params.track_tolerance_deg)
+        if self._last is None or tol == 0:
+            return q_meas, dq_meas, ""
+        off = np.max(np.abs(np.array(self._history) - q_meas), axis=1)
+        if off.min() <= tol:
+            return self._last.q, self._last.dq, ""
+        d = np.abs(self._last.q - q_meas)
+        j = int(np.argmax(d))
+        return q_meas, dq_meas, (f"re-planned from the measured state ({JOINT_NAMES[j]} "
+                                 f"{math.degrees(d[j]):.2f} deg from the last setpoint)")
+
+    def _emit(self, sp: Setpoint) -> None:
+        self._last = sp
+        self._history.append(sp.q)
+
     def _current(self, q_meas: np.ndarray, dq_meas: np.ndarray) -> InputParameter:
-        """Ruckig's input seeded from the measured state; acceleration = the last one commanded."""
+        """Ruckig's input seeded from the step's start state (see `_seed`); acceleration = the
+        last one commanded. Limits are symmetric unless the caller sets min_velocity again
+        (move_step does)."""
         inp = self.inp
+        inp.min_velocity = None
+        inp.synchronization = Synchronization.Time
         inp.current_position = q_meas
         inp.current_velocity = dq_meas
         inp.current_acceleration = self._last.ddq if self._last is not None else np.zeros(N_JOINTS)
         return inp
+
+    def _update(self, inp: InputParameter) -> Result:
+        """otg.update, falling back to unsynchronised joints when Ruckig's time synchronisation
+        fails numerically (the Python binding raises RuckigError, e.g. "error in step 2 ... for
+        t sync" for some braking states)."""
+        try:
+            return self.otg.update(inp, self.out)
+        except RuckigError:
+            if inp.synchronization == Synchronization.No:
+                return Result.Error
+            inp.synchronization = Synchronization.No
+            try:
+                return self.otg.update(inp, self.out)
+            except RuckigError:
+                return Result.Error
 
     def _from_out(self, reason: str = "") -> Setpoint:
         o = self.out
@@ -398,7 +461,10 @@ class Motion:
         inp.max_velocity = np.maximum(self._override * self.limits.dq_max, 1e-6)
         inp.max_acceleration = self.limits.ddq_max
         inp.max_jerk = self.limits.dddq_max
-        return Ruckig(N_JOINTS).calculate(inp, self._traj) in (Result.Working, Result.Finished)
+        try:
+            return Ruckig(N_JOINTS).calculate(inp, self._traj) in (Result.Working, Result.Finished)
+        except RuckigError:
+            return False
 
     def _samples(self, step_s: float = 0.02) -> tuple[np.ndarray, np.ndarray]:
         """(Q, dQ), each (N, 7): self._traj every step_s, ending at its end."""
@@ -467,7 +533,11 @@ class Motion:
         the ranges (less half the margin) and the keep-out; else stop from the measured state."""
         inp = self._brake_inp
         inp.current_position, inp.current_velocity, inp.current_acceleration = sp.q, sp.dq, sp.ddq
-        if self._brake_otg.calculate(inp, self._traj) not in (Result.Working, Result.Finished):
+        try:
+            result = self._brake_otg.calculate(inp, self._traj)
+        except RuckigError:
+            result = Result.Error
+        if result not in (Result.Working, Result.Finished):
             return self.stop_step(q_meas, dq_meas, reason="braking check: Ruckig cannot plan a stop")
         # Extrema from samples: Trajectory.position_extrema is wrong for the velocity interface
         # in the free edition (pantor/ruckig#215; its min comes out 0). Between samples h apart a
@@ -483,7 +553,7 @@ class Motion:
         if why:
             return self.stop_step(q_meas, dq_meas, reason=f"braking check: {why}")
         out = Setpoint(sp.q, sp.dq, sp.ddq, "; ".join(dict.fromkeys(reasons)))
-        self._last = out
+        self._emit(out)
         return out
 
     def _keepout_on_brake(self, q: np.ndarray, Q: np.ndarray, dq_travel: np.ndarray) -> str:
