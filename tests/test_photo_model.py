@@ -252,3 +252,15 @@ def test_any_coloured_ellipse_on_a_plain_backdrop_is_found(hue, sat, val, ax, ay
     assert np.all(hue_distance(m.inner_hue, h_true) <= 1)
     x, y, w, h = cv2.boundingRect(mask)
     assert m.origin_px == pytest.approx((x + (w - 1) / 2, y + (h - 1) / 2), abs=1.0)
+
+
+@pytest.mark.parametrize("kind", SPECIES)
+def test_a_jpeg_copy_of_the_photo_gives_the_same_model(kind):
+    """A photo from the web is usually a JPEG: at quality 60 the cut-out and its box hold."""
+    photo = specimen(kind, 0, other=True)
+    _, buf = cv2.imencode(".jpg", photo, [cv2.IMWRITE_JPEG_QUALITY, 60])
+    jpeg = cv2.imdecode(buf, cv2.IMREAD_COLOR)
+    a, b = build_photo_model(photo, PARAMS), build_photo_model(jpeg, PARAMS)
+    assert iou(a.mask, b.mask) > 0.82  # JPEG ringing adds a thin halo
+    assert b.size_px[0] == pytest.approx(a.size_px[0], rel=0.04)
+    assert b.size_px[1] == pytest.approx(a.size_px[1], rel=0.04)

@@ -90,6 +90,7 @@ def hue_distance(a: np.ndarray | int, b: np.ndarray | int) -> np.ndarray:
 _BORDER_FRAC = 0.03  # width of the border strip that samples the background (fraction of min(H, W))
 _MIN_TARGET_PX = 64  # fewer target pixels than this: no separable target
 _MAX_TARGET_FRAC = 0.9  # a "target" covering more of the photo than this was not separated
+_BACKDROP_TINT = 6  # Lab a*/b* margin (8-bit units) around the grey backdrop's own tint
 
 
 def parse_roi(text: str, where: str = "--roi") -> tuple[int, int, int, int]:
@@ -119,8 +120,9 @@ def _background_like(photo_bgr: np.ndarray, params: PhotoModelParams) -> np.ndar
 
     Chromatic border pixels give a set of background hues (bins holding >= 0.5 % of the border,
     widened by the hue tolerance) and a saturation range; achromatic ones (too grey or too dark
-    to carry a hue) give a brightness range. A pixel is background-like when it is chromatic with
-    a background hue and saturation, or achromatic with a background brightness."""
+    to carry a hue) give a brightness range and a tint range (Lab a*, b*). A pixel is
+    background-like when it is chromatic with a background hue and saturation, or achromatic
+    with a background brightness and tint."""
     hsv = cv2.cvtColor(photo_bgr, cv2.COLOR_BGR2HSV)
     H, W = hsv.shape[:2]
     b = max(2, round(_BORDER_FRAC * min(H, W)))
@@ -144,7 +146,15 @@ def _background_like(photo_bgr: np.ndarray, params: PhotoModelParams) -> np.ndar
     achrom_b = border & achrom
     if achrom_b.sum() >= 0.02 * n_border:
         v_lo, v_hi = np.percentile(v[achrom_b], [1, 99])
-        bg |= achrom & (v >= v_lo - 25) & (v <= v_hi + 25)
+        # the backdrop's tint too (Lab a*, b*): a faintly coloured pixel too grey to carry a
+        # hue — a thin appendage after JPEG chroma subsampling — is not the backdrop
+        lab = cv2.cvtColor(photo_bgr, cv2.COLOR_BGR2LAB)
+        a_, b_ = lab[..., 1].astype(np.int16), lab[..., 2].astype(np.int16)
+        a_lo, a_hi = np.percentile(a_[achrom_b], [1, 99])
+        b_lo, b_hi = np.percentile(b_[achrom_b], [1, 99])
+        tint = _BACKDROP_TINT
+        bg |= achrom & (v >= v_lo - 25) & (v <= v_hi + 25) & (a_ >= a_lo - tint) & (a_ <= a_hi + tint) \
+            & (b_ >= b_lo - tint) & (b_ <= b_hi + tint)
     return bg
 
 
