@@ -201,6 +201,18 @@ def test_kernel_equals_numpy_reference(rig_name, kernel):
                                        fitness_reference(R, t, alpha, MODEL, FRAME, rig, q), atol=1e-12)
 
 
+def test_kernel_degenerate_poses_equal_reference():
+    """Model planes through or next to the camera centre: points overflow to inf/NaN in the
+    projection and must count as outside in both implementations (a fastmath kernel got this
+    wrong; found by the hypothesis test below)."""
+    rig = distorted_rig()
+    R = np.stack([rot("y", 57.3), rot("x", 89.9), rot("y", 90.0), np.eye(3), rot("x", 30.0)])
+    t = np.array([[0.0, 0.0, 1e-171], [0.0, 0.0, 0.0], [0.0, 0.0, 1e-3], [0.0, 0.0, 1e-9], [0.0, 0.0, 5.0]])
+    alpha = np.array([1.0, 1.0, 1e-6, 1e6, 1e-3])
+    np.testing.assert_array_equal(counts_compiled(R, t, alpha, MODEL, FRAME, rig, PARAMS),
+                                  counts_reference(R, t, alpha, MODEL, FRAME, rig, PARAMS))
+
+
 def test_kernel_reads_the_right_pixels():
     """A hue image with a distinct code per pixel region: the kernel and the reference must
     agree point by point, not only in total (a transposed index would not)."""

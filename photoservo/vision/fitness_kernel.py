@@ -23,8 +23,7 @@ def camera_vector(K: np.ndarray, dist: np.ndarray, size: tuple[int, int]) -> np.
     return np.array([K[0, 0], K[1, 1], K[0, 2], K[1, 2], size[0], size[1], *d, model])
 
 
-# fastmath without 'nnan'/'ninf' where NaN/inf must be seen; full fastmath in the projection
-# loop, whose indices are clamped before any read.
+# fastmath without 'nnan'/'ninf': the behind-camera and in-image tests must see NaN and inf.
 _FAST = {"nsz", "arcp", "contract", "afn", "reassoc"}
 
 
@@ -52,18 +51,20 @@ def _plane_map(R, t, alpha, rig_R, rig_T, cam, right, a):  # pragma: no cover - 
             a[1, c] = cam[1] * y + cam[3] * z
 
 
-@njit(cache=True, error_model="numpy", fastmath=True, nogil=True)
-def _pixel_indices(a, uv, cam, idx, offset):  # pragma: no cover - compiled
-    """Nearest-pixel flat index (row·W + col) of every model-plane point uv[k] px in one camera
-    into idx[offset + k], -1 when it falls outside the image or behind the camera; returns how
-    many did. Pixel k covers [k - 0.5, k + 0.5): with f = x + 0.5, the point is in the image
+@njit(cache=True, error_model="numpy", fastmath=_FAST, nogil=True)
+def _pixel_indices(a, u_, v_, cam, idx):  # pragma: no cover - compiled
+    """Nearest-pixel flat index (row·W + col) of every model-plane point (u_[k], v_[k]) px in one
+    camera into idx[k], -1 when it falls outside the image or behind the camera; returns how
+    many did. u_ and v_ are separate contiguous arrays: that lets the loop vectorise (3.5x faster
+    than reading an (N, 2) array here). Pixel k covers [k - 0.5, k + 0.5): with f = x + 0.5, the point is in the image
     when 0 <= f < W, and then floor(f) == int(f) (truncation, cheap and vectorisable).
 
     Without distortion `a` is the plane-to-image homography: one division per point in a
     branch-free loop. With distortion `a` maps to the camera frame and OpenCV's model is applied
-    to the normalised coordinates, as in rig.project_points. Full fastmath: the caller passes
-    finite maps only and `_camera_counts` clamps every index before it reads, so a degenerate
-    point can at worst be miscounted, never read out of bounds.
+    to the normalised coordinates, as in rig.project_points. No 'nnan'/'ninf' fastmath here: a
+    point near the camera's plane overflows to inf/NaN and must test as outside (full fastmath
+    counted such points inside; the hypothesis test caught it). `_camera_counts` also clamps
+    every index before it reads, so no point can ever read out of bounds.
     """
     W = cam[4]
     H = cam[5]
@@ -74,21 +75,21 @@ def _pixel_indices(a, uv, cam, idx, offset):  # pragma: no cover - compiled
     k1, k2, p1, p2, k3, k4, k5, k6 = cam[6], cam[7], cam[8], cam[9], cam[10], cam[11], cam[12], cam[13]
     outside = 0
     if cam[14] == 0.0:
-        for k in range(uv.shape[0]):
-            u = uv[k, 0]
-            v = uv[k, 1]
+        for k in range(u_.shape[0]):
+            u = u_[k]
+            v = v_[k]
             Z = a20 * u + a21 * v + a22
             iz = 1.0 / Z
             fc = (a00 * u + a01 * v + a02) * iz + 0.5
             fr = (a10 * u + a11 * v + a12) * iz + 0.5
             inside = (Z > 0.0) & (fc >= 0.0) & (fc < W) & (fr >= 0.0) & (fr < H)
             i = np.int32(fr if inside else 0.0) * w + np.int32(fc if inside else 0.0)
-            idx[offset + k] = i if inside else np.int32(-1)
+            idx[k] = i if inside else np.int32(-1)
             outside += np.int32(not inside)
     elif cam[14] == 1.0:  # polynomial k1 k2 p1 p2 k3: no second division
-        for k in range(uv.shape[0]):
-            u = uv[k, 0]
-            v = uv[k, 1]
+        for k in range(u_.shape[0]):
+            u = u_[k]
+            v = v_[k]
             Z = a20 * u + a21 * v + a22
             iz = 1.0 / Z
             x = (a00 * u + a01 * v + a02) * iz
@@ -101,12 +102,12 @@ def _pixel_indices(a, uv, cam, idx, offset):  # pragma: no cover - compiled
             fr = fy * yd + cy + 0.5
             inside = (Z > 0.0) & (fc >= 0.0) & (fc < W) & (fr >= 0.0) & (fr < H)
             i = np.int32(fr if inside else 0.0) * w + np.int32(fc if inside else 0.0)
-            idx[offset + k] = i if inside else np.int32(-1)
+            idx[k] = i if inside else np.int32(-1)
             outside += np.int32(not inside)
     else:  # rational model (k4 k5 k6)
-        for k in range(uv.shape[0]):
-            u = uv[k, 0]
-            v = uv[k, 1]
+        for k in range(u_.shape[0]):
+            u = u_[k]
+            v = v_[k]
             Z = a20 * u + a21 * v + a22
             iz = 1.0 / Z
             x = (a00 * u + a01 * v + a02) * iz
@@ -119,21 +120,21 @@ def _pixel_indices(a, uv, cam, idx, offset):  # pragma: no cover - compiled
             fr = fy * yd + cy + 0.5
             inside = (Z > 0.0) & (fc >= 0.0) & (fc < W) & (fr >= 0.0) & (fr < H)
             i = np.int32(fr if inside else 0.0) * w + np.int32(fc if inside else 0.0)
-            idx[offset + k] = i if inside else np.int32(-1)
+            idx[k] = i if inside else np.int32(-1)
             outside += np.int32(not inside)
     return outside
 
 
 @njit(cache=True, error_model="numpy", fastmath=_FAST, nogil=True)
-def _camera_counts(R, t, alpha, rig_R, rig_T, cam, right, inner_uv, inner_hue, outer_uv,
-                   target_hues, hue, tol, out):  # pragma: no cover - compiled
-    """Case counts of one individual in one camera into out[0:5] (see fitness.IN_MATCH...)."""
+def _camera_counts(R, t, alpha, rig_R, rig_T, cam, right, u, v, n_in, inner_hue, target_hues,
+                   hue, tol, out):  # pragma: no cover - compiled
+    """Case counts of one individual in one camera into out[0:5] (see fitness.IN_MATCH...);
+    points (u[k], v[k]) px, the first n_in of them inner points."""
     a = np.empty((3, 3))
     _plane_map(R, t, alpha, rig_R, rig_T, cam, right, a)
-    n_in = inner_uv.shape[0]
-    n = n_in + outer_uv.shape[0]
+    n = u.shape[0]
     idx = np.empty(n, np.int32)
-    outside = _pixel_indices(a, inner_uv, cam, idx, 0) + _pixel_indices(a, outer_uv, cam, idx, n_in)
+    outside = _pixel_indices(a, u, v, cam, idx)
     flat = hue.ravel()
     last = flat.shape[0] - 1
     in_match = 0
@@ -163,6 +164,22 @@ def _camera_counts(R, t, alpha, rig_R, rig_T, cam, right, inner_uv, inner_hue, o
     out[4] = outside
 
 
+@njit(cache=True, error_model="numpy", nogil=True)
+def _split_points(inner_uv, outer_uv):  # pragma: no cover - compiled
+    """(u, v, n_in): the inner then outer points' coordinates as two contiguous arrays."""
+    n_in = inner_uv.shape[0]
+    n = n_in + outer_uv.shape[0]
+    u = np.empty(n)
+    v = np.empty(n)
+    for k in range(n_in):
+        u[k] = inner_uv[k, 0]
+        v[k] = inner_uv[k, 1]
+    for k in range(outer_uv.shape[0]):
+        u[n_in + k] = outer_uv[k, 0]
+        v[n_in + k] = outer_uv[k, 1]
+    return u, v, n_in
+
+
 @njit(cache=True, error_model="numpy", fastmath=_FAST, nogil=True)
 def counts_serial(R, t, alpha, rig_R, rig_T, cam_l, cam_r, inner_uv, inner_hue, outer_uv,
                   target_hues, hue_l, hue_r, tol):  # pragma: no cover - compiled
@@ -171,12 +188,13 @@ def counts_serial(R, t, alpha, rig_R, rig_T, cam_l, cam_r, inner_uv, inner_hue, 
     left (0) and right (1) camera. cam_l, cam_r: `camera_vector`s; hue_l, hue_r: (H, W) uint8
     C-contiguous hue images; target_hues: (180,) bool."""
     P = R.shape[0]
+    u, v, n_in = _split_points(inner_uv, outer_uv)
     counts = np.zeros((P, 2, 5), dtype=np.int64)
     for p in range(P):
-        _camera_counts(R[p], t[p], alpha[p], rig_R, rig_T, cam_l, False, inner_uv, inner_hue,
-                       outer_uv, target_hues, hue_l, tol, counts[p, 0])
-        _camera_counts(R[p], t[p], alpha[p], rig_R, rig_T, cam_r, True, inner_uv, inner_hue,
-                       outer_uv, target_hues, hue_r, tol, counts[p, 1])
+        _camera_counts(R[p], t[p], alpha[p], rig_R, rig_T, cam_l, False, u, v, n_in, inner_hue,
+                       target_hues, hue_l, tol, counts[p, 0])
+        _camera_counts(R[p], t[p], alpha[p], rig_R, rig_T, cam_r, True, u, v, n_in, inner_hue,
+                       target_hues, hue_r, tol, counts[p, 1])
     return counts
 
 
@@ -185,15 +203,16 @@ def counts_parallel(R, t, alpha, rig_R, rig_T, cam_l, cam_r, inner_uv, inner_hue
                     target_hues, hue_l, hue_r, tol):  # pragma: no cover - compiled
     """`counts_serial` with the (individual, camera) jobs spread over numba's threads."""
     P = R.shape[0]
+    u, v, n_in = _split_points(inner_uv, outer_uv)
     counts = np.zeros((P, 2, 5), dtype=np.int64)
     for job in prange(2 * P):
         p = job // 2
         if job % 2 == 0:
-            _camera_counts(R[p], t[p], alpha[p], rig_R, rig_T, cam_l, False, inner_uv, inner_hue,
-                           outer_uv, target_hues, hue_l, tol, counts[p, 0])
+            _camera_counts(R[p], t[p], alpha[p], rig_R, rig_T, cam_l, False, u, v, n_in, inner_hue,
+                           target_hues, hue_l, tol, counts[p, 0])
         else:
-            _camera_counts(R[p], t[p], alpha[p], rig_R, rig_T, cam_r, True, inner_uv, inner_hue,
-                           outer_uv, target_hues, hue_r, tol, counts[p, 1])
+            _camera_counts(R[p], t[p], alpha[p], rig_R, rig_T, cam_r, True, u, v, n_in, inner_hue,
+                           target_hues, hue_r, tol, counts[p, 1])
     return counts
 
 
