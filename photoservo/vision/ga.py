@@ -190,6 +190,15 @@ class GA:
         self.sigma[slots] = self.params.sigma if sigma is None else sigma
         self._stale[slots] = True
 
+    def set_genes(self, genes: np.ndarray) -> None:
+        """Replace the whole population's genes (P, D), e.g. re-expressed in a moved camera's
+        frame by the tracker; every individual is re-scored, mutation steps are kept."""
+        genes = np.asarray(genes, dtype=np.float64)
+        if genes.shape != self.genes.shape:
+            raise ValueError(f"set_genes: expected shape {self.genes.shape}, got {genes.shape}")
+        self.genes = self.region.repair(genes)
+        self._stale[:] = True
+
     # ------------------------------------------------------------------ evolution
 
     def evaluate(self) -> None:
