@@ -177,7 +177,7 @@ def test_ik_from_home_success_rate():
             ok += 1
         except IKError:
             pass
-    assert ok >= 28
+    assert ok >= 29  # 300 seeded poses: 100 % (benchmarks/kinematics_motion.py)
 
 
 def test_ik_unreachable_raises():

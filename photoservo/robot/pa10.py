@@ -330,14 +330,20 @@ def ik(T_target: np.ndarray, q0, limits: PA10Limits, *, T_flange_tool: np.ndarra
     Repeats q <- clip(q + dls_step(q, pose_error(T_target, fk(q)))) from q0, each step at most
     max_step_rad per joint, holding a joint that would leave its range at the limit (the step is
     re-solved without it). The redundant joint pulls toward HOME_Q (k_null). When the start q0
-    fails and `retry_from_home`, it tries once more from HOME_Q. The result is mapped to the
+    fails and `retry_from_home`, it tries again from HOME_Q and from HOME_Q with S1 turned toward
+    the target. The result is mapped to the
     equivalent angles nearest q0 (`nearest_equivalent`) and always lies inside the joint ranges.
     Raises IKError with the residual when the pose is not reached within tol_mm / tol_rad.
     """
     q0 = _q(q0)
     seeds = [np.clip(q0, limits.q_min, limits.q_max)]
     if retry_from_home:
-        seeds.append(np.array(HOME_Q))
+        # HOME_Q, and HOME_Q turned by S1 to face the target (a pose behind the base is far
+        # from HOME_Q in joint space and the DLS iteration stalls against a range end)
+        p = T_target[:3, 3]
+        facing = np.array(HOME_Q)
+        facing[0] = np.clip(math.atan2(p[1], p[0]), limits.q_min[0], limits.q_max[0])
+        seeds += [np.array(HOME_Q), facing]
     best = (np.inf, np.inf)
     for q in seeds:
         for _ in range(max_iter):
