@@ -119,6 +119,7 @@ class BridgeModel:
         self.setpoint_seq: int | None = None
         self.accepted = 0
         self.refused = 0
+        self.refusals: dict[str, int] = {}  # refused setpoints by NACK error name
         self.rx_crc_errors = 0
         self.t_tick = now  # bridge time of the last tick: when q, dq were "measured"
 
@@ -136,6 +137,7 @@ class BridgeModel:
             if err is not None:
                 self.refused += 1
                 code, joint, value = err
+                self.refusals[code.name] = self.refusals.get(code.name, 0) + 1
                 return [P.Nack(seq, int(m.TYPE), int(code), joint, value)]
             self.accepted += 1
             self.q_sp = np.array(m.q, float)
@@ -359,9 +361,10 @@ class FaultInjector:
 
 
 class _Pacer:
-    """Token bucket: bytes may pass at baud/10 per second (8N1), at most `burst` at once."""
+    """Token bucket: bytes may pass at baud/10 per second (8N1). Unused capacity is kept up to
+    `burst` bytes (a UART FIFO / DMA buffer), so a loop that wakes late does not lose line time."""
 
-    def __init__(self, baud: int, burst: int = 32) -> None:
+    def __init__(self, baud: int, burst: int = 256) -> None:
         self.rate = baud / 10.0
         self.burst = burst
         self.tokens = float(burst)

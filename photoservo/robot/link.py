@@ -128,6 +128,7 @@ class Link:
         self._reader: threading.Thread | None = None
         self._t_open = 0.0
         self._servo_requested = False
+        self._errors_at_sync = 0
 
     # ------------------------------------------------------------------ life cycle
     def open(self) -> P.VersionInfo:
@@ -137,6 +138,8 @@ class Link:
             LinkError: the port cannot be opened, or no VERSION came within ack_timeout_s.
         """
         self._closing.clear()
+        self.decoder = P.Decoder()
+        self._errors_at_sync = 0
         with self._cond:
             self._error = None
             self._history.clear()
@@ -318,8 +321,9 @@ class Link:
 
     @property
     def crc_errors(self) -> int:
-        """Frames from the bridge dropped by the host for a bad CRC/COBS/length/version/type."""
-        return self.decoder.errors
+        """Frames from the bridge dropped by the host for a bad CRC/COBS/length/version/type,
+        not counting the tail of a frame that was on the line when the port was opened."""
+        return self.decoder.errors - self._errors_at_sync
 
     @property
     def resyncs(self) -> int:
@@ -419,6 +423,8 @@ class Link:
 
     def _on_frame(self, frame: P.Frame, t_rx: float) -> None:
         m = frame.msg
+        if self.decoder.frames == 1:
+            self._errors_at_sync = self.decoder.errors
         with self._cond:
             if isinstance(m, P.StateReport):
                 off = self._clock_offset(t_rx, m.t_bridge_us * 1e-6)

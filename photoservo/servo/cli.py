@@ -21,6 +21,8 @@ VERBS: dict[str, tuple[str, str]] = {
     "synth": ("photoservo.servo.cmd_synth", "render a synthetic stereo scene with ground truth"),
     "scan": ("photoservo.servo.cmd_scan", "fitness maps (pose axis x alpha) around a given pose, as heatmap PNGs"),
     "estimate": ("photoservo.servo.cmd_estimate", "find the photo's creature in a stereo pair: 6-DOF pose and size"),
+    "pa10-sim": ("photoservo.servo.cmd_pa10_sim", "PA-10 serial-bridge emulator on a pty (prints the device path)"),
+    "move": ("photoservo.servo.cmd_move", "move the arm to joint angles (deg) or home through the bridge, jerk-limited"),
 }
 
 

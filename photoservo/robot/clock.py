@@ -1,0 +1,42 @@
+"""Fixed-rate loop timing on the monotonic clock (the control loop's 250 Hz cadence).
+
+    rate = Rate(250.0)
+    while running:
+        ...one control period of work...
+        rate.sleep()          # until the next period boundary; returns how late we woke (s)
+
+Periods are kept on a fixed grid (t0 + k·T), so one late wake-up does not shift every later
+period; after a stall longer than `max_behind` periods the grid restarts from now instead of
+running the missed periods back to back.
+"""
+
+from __future__ import annotations
+
+import time
+
+
+class Rate:
+    """Sleep to the next boundary of a fixed period T = 1/hz (monotonic seconds)."""
+
+    def __init__(self, hz: float, max_behind: int = 3) -> None:
+        if not hz > 0:
+            raise ValueError(f"rate {hz} Hz must be > 0")
+        self.T = 1.0 / hz
+        self.max_behind = max_behind
+        self.t_next = time.monotonic() + self.T
+        self.overruns = 0  # periods whose work ended after the next boundary
+
+    def sleep(self) -> float:
+        """Sleep until the next period boundary; return the lateness of the wake-up (s, >= 0)."""
+        now = time.monotonic()
+        if now > self.t_next:
+            self.overruns += 1
+            if now - self.t_next > self.max_behind * self.T:
+                self.t_next = now + self.T
+                return 0.0
+        else:
+            time.sleep(self.t_next - now)
+        woke = time.monotonic()
+        late = max(0.0, woke - self.t_next)
+        self.t_next += self.T
+        return late

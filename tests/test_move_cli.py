@@ -1,0 +1,143 @@
+"""`photoservo move` and `photoservo pa10-sim` end to end over a real pty."""
+
+from __future__ import annotations
+
+import dataclasses
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from photoservo.robot import protocol as P
+from photoservo.robot.emulator import Emulator, EmulatorParams
+from photoservo.robot.pa10 import HOME_Q
+from photoservo.servo.cli import main
+from photoservo.tomlconf import build_dataclass, configs_dir, read_toml
+
+PY = sys.executable
+EMU = build_dataclass(EmulatorParams, read_toml(configs_dir() / "default.toml")["emulator"], "emulator")
+
+
+@pytest.fixture
+def emu():
+    # a longer watchdog than shipped: the move runs in this process next to the emulator
+    # thread on a busy 2-core machine (watchdog behaviour itself: tests/test_link.py)
+    e = Emulator(dataclasses.replace(EMU, watchdog_periods=25))
+    e.start()
+    yield e
+    e.stop()
+    assert e.error is None
+
+
+def test_move_reaches_target_and_disables(emu, tmp_path, capsys):
+    target_deg = np.degrees(HOME_Q) + [8.0, -4.0, 5.0, 6.0, -10.0, 7.0, 12.0]
+    rrd = tmp_path / "move.rrd"
+    rc = main(["move", "--port", emu.path, "--joints", *map(str, target_deg), "--speed", "80",
+               "--record", str(rrd)])
+    err = capsys.readouterr().err
+    assert rc == 0, err
+    assert "move: done" in err and "100%" in err
+    s = emu.true_state()
+    np.testing.assert_allclose(np.degrees(s.q), target_deg, atol=0.06)
+    assert s.status & P.Status.BRAKED and not s.status & P.Status.SERVO_ON
+    assert emu.model.refused == 0, emu.model.refusals
+    from photoservo.servo.recording import verify_rrd
+
+    files = sorted(tmp_path.glob("move*.rrd"))  # one file, or segments move.seg0001.rrd ...
+    assert files and all(verify_rrd(f) == (True, verify_rrd(f)[1]) for f in files)
+
+
+@pytest.mark.parametrize("joints, words", [
+    (["0", "95", "0", "60", "0", "90", "0"], ["S2", "95"]),  # outside S2's +-91 deg range
+    (["0", "90", "0", "60", "0", "90", "0"], ["S2", "margin"]),  # inside the range, not the margin
+])
+def test_move_refuses_target_outside_limits(emu, capsys, joints, words):
+    rc = main(["move", "--port", emu.path, "--joints", *joints, "--no-record"])
+    err = capsys.readouterr().err.strip()
+    assert rc == 2
+    assert len(err.splitlines()) == 1 and all(w in err for w in words), err
+    assert emu.model.accepted == 0 and not emu.model.servo_on
+
+
+def test_move_refuses_keepout(emu, capsys):
+    # S2 = 85, E1 = 90: upper arm near horizontal, forearm down -> flange at z = -224 mm, below a
+    # water plane set at z = 0
+    rc = main(["move", "--port", emu.path, "--joints", "0", "85", "0", "90", "0", "0", "0", "--no-record",
+               "--set", "motion.z_min_mm=0.0"])
+    err = capsys.readouterr().err.strip()
+    assert rc == 2 and len(err.splitlines()) == 1 and "water" in err, err
+
+
+def test_move_bad_port_is_one_line_exit_2(tmp_path, capsys):
+    rc = main(["move", "--port", str(tmp_path / "nothing"), "--home", "--no-record"])
+    err = capsys.readouterr().err.strip()
+    assert rc == 2 and len(err.splitlines()) == 1 and "cannot open" in err
+
+
+def test_move_ctrl_c_makes_controlled_stop(emu):
+    target = np.degrees(HOME_Q) + [60.0, 0, 0, 0, 0, 0, 0]  # ~3 s at 50 % speed
+    p = subprocess.Popen([PY, "-m", "photoservo.servo.cli", "move", "--port", emu.path, "--joints",
+                          *map(str, target), "--speed", "50", "--no-record"],
+                         stderr=subprocess.PIPE, text=True)
+    try:
+        assert _wait(lambda: emu.true_state().status & P.Status.MOVING, 15.0), "never started moving"
+        time.sleep(0.3)
+        p.send_signal(signal.SIGINT)
+        _, err = p.communicate(timeout=15)
+    finally:
+        if p.poll() is None:
+            p.kill()
+    assert p.returncode == 130, err
+    assert "controlled stop" in err and "Traceback" not in err
+    s = emu.true_state()
+    assert not s.status & P.Status.MOVING and s.status & P.Status.BRAKED
+    assert s.fault == P.Fault.NONE  # stopped by command, not by the watchdog's brake timeout
+    assert abs(np.degrees(s.q[0]) - target[0]) > 5.0  # stopped on the way
+
+
+def test_pa10_sim_process_prints_path_links_and_stops(tmp_path):
+    link = tmp_path / "pa10"
+    p = subprocess.Popen([PY, "-m", "photoservo.servo.cli", "pa10-sim", "--link", str(link)],
+                         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        path = p.stdout.readline().strip()
+        assert path.startswith("/dev/pts/") and os.path.realpath(link) == path
+        from photoservo.robot.link import Link, LinkParams
+
+        lp = build_dataclass(LinkParams, read_toml(configs_dir() / "default.toml")["link"], "link")
+        with Link(str(link), lp) as lk:
+            assert lk.version.n_joints == 7
+            np.testing.assert_allclose(lk.wait_state().q, HOME_Q, atol=1e-6)
+        p.send_signal(signal.SIGTERM)
+        _, err = p.communicate(timeout=10)
+    finally:
+        if p.poll() is None:
+            p.kill()
+    assert p.returncode == 0, err
+    assert not link.exists() and not link.is_symlink()
+    assert "stopped" in err
+
+
+def test_pa10_sim_bad_flag_is_one_line_exit_2(capsys):
+    assert main(["pa10-sim", "--drop", "1.5"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "drop" in err
+
+
+def _wait(pred, timeout: float) -> bool:
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        if pred():
+            return True
+        time.sleep(0.01)
+    return False
+
+
+def test_docs_mention_both_verbs():
+    readme = (Path(__file__).resolve().parents[1] / "docs" / "protocol.md").read_text()
+    assert "pa10-sim" in readme
