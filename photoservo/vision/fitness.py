@@ -32,9 +32,14 @@ and it cannot raise the score by shrinking the denominator). The two cameras com
     product:  F = max(F_L, 0) · max(F_R, 0)          (demand both; 1.0 still means perfect)
 
 Two implementations share one API: `fitness_reference` (vectorised numpy, built on
-`rig.project_points`, the specification) and a compiled numba kernel used by `fitness` when
-`[fitness] kernel = "numba"`. Both count, per individual and camera, how many points fell in
-each case; the same `_combine` turns counts into F, so they agree exactly.
+`rig.project_points`, the specification) and the compiled numba kernel of `fitness_kernel`
+used by `fitness` when `[fitness] kernel = "numba"` (one thread, default) or
+"numba-parallel". Both count, per individual and camera, how many points fell in each case
+(`counts_reference` / `counts_compiled`, equal in the tests); F follows from the counts by the
+formula above (`_combine`, and `fitness_kernel.combine` for the kernel).
+
+Speed (benchmarks/fitness_speed.py): one generation of 30 individuals x 1000 points takes
+~0.3 ms with the kernel against ~10-30 ms for the numpy reference and 213 ms in the paper.
 """
 
 from __future__ import annotations
