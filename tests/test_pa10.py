@@ -1,6 +1,7 @@
 """PA-10 kinematics: FK against an independent product of exponentials, the Jacobian against
 finite differences, IK round trips, wide-range joints, sign conventions and the limits file."""
 
+import doctest
 import math
 
 import numpy as np
@@ -238,3 +239,7 @@ def test_bad_limits_file_names_the_key(tmp_path):
     p.write_text(text.replace("ddq_max_deg", "ddq_maxdeg"))
     with pytest.raises(InputError, match="unknown key 'joints.ddq_maxdeg'"):
         load_limits(p)
+
+
+def test_docstring_examples_run():
+    assert doctest.testmod(pa10).failed == 0

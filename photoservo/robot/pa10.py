@@ -1,7 +1,7 @@
 """Mitsubishi PA-10 kinematics (method step 6: the arm that carries the stereo rig) and its limits.
 
-Standard Denavit-Hartenberg (Craig's "distal" convention as in Spong/Corke), joint i moving
-frame i-1 -> i:
+Standard (distal) Denavit-Hartenberg as in Spong and Corke's DHRobot, not Craig's modified DH;
+joint i moves frame i-1 -> i:
 
     A_i(q_i) = Rz(theta_i) · Tz(d_i) · Tx(a_i) · Rx(alpha_i),   theta_i = q_i
 
@@ -10,9 +10,9 @@ frame i-1 -> i:
     alpha = (-90, 90, -90, 90, -90, 90, 0) deg
 
 Joint signs and zero offsets: q_i IS the DH angle theta_i (zero offset 0 for every joint),
-positive by the right-hand rule about z_{i-1}. At q = 0 the arm stands straight up, every frame
-has the base orientation (the twists cancel in pairs) and the flange origin is at
-z = 315 + 450 + 500 + 80 = 1345 mm. Joints S1, S3, E2, W2 roll about the link's long axis
+positive by the right-hand rule about z_{i-1}. At q = 0 the arm stands straight up, frames 2, 4,
+6 and the flange have the base orientation (the twists cancel in pairs) and the flange origin is
+at z = 315 + 450 + 500 + 80 = 1345 mm. Joints S1, S3, E2, W2 roll about the link's long axis
 (+z at q = 0); S2, E1, W1 pitch (about base +y at q = 0, so positive S2 leans the arm toward
 base +x).
 
@@ -23,6 +23,15 @@ plate); a tool or the rig's left camera is attached with T_flange_tool / T_flang
 
 Limits (joint ranges, speed, acceleration, jerk) live in configs/pa10.toml, in degrees there and
 in radians in `PA10Limits`.
+
+>>> bool(np.allclose(fk(np.zeros(7))[:3, 3], [0, 0, 1345]))
+True
+>>> T = fk(HOME_Q)                       # bent home: flange in front of the base, z axis down
+>>> bool(np.allclose(T[:3, 3], [725, 0, 624.71], atol=0.01)), bool(np.allclose(T[:3, 2], [0, 0, -1]))
+(True, True)
+>>> q = ik(fk(HOME_Q + 0.1), HOME_Q, load_limits())
+>>> bool(np.linalg.norm(pose_error(fk(HOME_Q + 0.1), fk(q))[:3]) < 0.05)
+True
 """
 
 from __future__ import annotations
