@@ -26,6 +26,7 @@ from photoservo.vision.calibrate import (
     calibrate_stereo,
     fit_water_plane,
     flag_outliers,
+    hand_eye_motion_warnings,
     make_T,
     pair_detections,
     rotation_angle_deg,
@@ -203,13 +204,19 @@ def test_hand_eye_recovers_camera_on_flange(rig):
 def test_hand_eye_pure_translation_is_warned(rig):
     T_bf = look_at_flange_poses(T_base_board_true(), true_hand_eye(), 5, rotate=False)
     T_lb = hand_eye_views(rig, T_bf)
-    try:
-        res = calibrate_hand_eye(T_bf, T_lb)
-    except InputError as e:  # OpenCV may also give up: then the error carries the warning
-        assert "vary too little in rotation" in str(e)
-    else:
-        assert any("vary too little in rotation" in w for w in res.warnings)
-        assert res.max_rotation_deg < 1.0
+    with pytest.raises(InputError, match="vary too little in rotation"):
+        calibrate_hand_eye(T_bf, T_lb)
+
+
+def test_hand_eye_small_rotation_is_warned():
+    rng = np.random.default_rng(2)
+    X = true_hand_eye()
+    T_bf = [make_T(cv2.Rodrigues(np.radians(rng.uniform(-3, 3, 3)))[0], rng.uniform(-50, 50, 3) + [600, 0, 300])
+            for _ in range(5)]
+    T_lb = [np.linalg.inv(T @ X) @ T_base_board_true() for T in T_bf]
+    res = calibrate_hand_eye(T_bf, T_lb)
+    assert 1.0 < res.max_rotation_deg < 10.0
+    assert any("vary too little in rotation" in w for w in res.warnings)
 
 
 def test_hand_eye_single_axis_is_warned():
@@ -217,8 +224,9 @@ def test_hand_eye_single_axis_is_warned():
     T_bf = [make_T(R, np.array([500.0 + 10 * k, 0.0, 400.0])) for k, R in enumerate(Rz)]
     X = true_hand_eye()
     T_lb = [np.linalg.inv(T @ X) @ T_base_board_true() for T in T_bf]
-    res = calibrate_hand_eye(T_bf, T_lb)
-    assert any("about one axis" in w for w in res.warnings)
+    assert any("about one axis" in w for w in hand_eye_motion_warnings(T_bf)[0])
+    with pytest.raises(InputError, match="no solution: all rotations between the flange poses are about one axis"):
+        calibrate_hand_eye(T_bf, T_lb)  # Park's method cannot solve it
 
 
 def test_hand_eye_input_errors():

@@ -167,8 +167,30 @@ def test_hand_eye_pure_translation_warns(tmp_path, capsys):
     rig = rig_file(tmp_path)
     code, _, err = run_cli(["calibrate", "hand-eye", "--rig", str(rig), "--views", str(views), *BOARD_ARGS,
                             "--charuco", "--out", str(tmp_path / "he.toml")], capsys)
-    assert "vary too little in rotation" in err
-    assert code in (0, 2)
+    assert_one_line_error(code, err, "the flange poses vary too little in rotation (largest 0.0 deg")
+    assert not (tmp_path / "he.toml").exists()
+
+
+def test_hand_eye_small_rotation_needs_force(tmp_path, capsys):
+    """Poses that rotate only ~5 degrees: refused by default, written with --force and a warning."""
+    rng = np.random.default_rng(4)
+    X = true_hand_eye()
+    T_base_left0 = np.linalg.inv(make_T(np.eye(3), np.array([0.0, 0.0, 0.0]))) @ T_base_board() @ np.linalg.inv(
+        make_T(np.eye(3), np.array([-125.0, -87.5, 520.0])))
+    T_bf = []
+    for k in range(5):
+        d = make_T(cv2.Rodrigues(np.radians(rng.uniform(-2.5, 2.5, 3)))[0], rng.uniform(-15, 15, 3))
+        T_bf.append(T_base_left0 @ d @ np.linalg.inv(X))
+    views = tmp_path / "views"
+    write_hand_eye_views(views, T_bf)
+    rig = rig_file(tmp_path)
+    argv = ["calibrate", "hand-eye", "--rig", str(rig), "--views", str(views), *BOARD_ARGS, "--charuco"]
+    code, _, err = run_cli(argv, capsys)
+    assert_one_line_error(code, err, "--force writes it anyway")
+    assert load_rig(rig).hand_eye is None
+    code, _, err = run_cli([*argv, "--force"], capsys)
+    assert code == 0 and "warning: the flange poses vary too little in rotation" in err
+    assert load_rig(rig).hand_eye is not None
 
 
 def test_hand_eye_symmetric_chessboard_refused(tmp_path, capsys):

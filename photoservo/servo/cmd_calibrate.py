@@ -46,6 +46,7 @@ from photoservo.vision.board import (
 )
 from photoservo.vision.calibrate import (
     MIN_HAND_EYE_VIEWS,
+    MIN_ROTATION_DEG,
     board_points_left,
     board_pose,
     calibrate_hand_eye,
@@ -151,8 +152,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     h.add_argument("--views", required=True, metavar="DIR", help="left images (DIR or DIR/left)")
     h.add_argument("--poses", metavar="POSES.csv", help="flange poses (default DIR/poses.csv)")
     _board_options(h)
-    h.add_argument("--method", default="tsai", choices=["tsai", "park", "horaud", "andreff", "daniilidis"])
+    h.add_argument("--method", default="park", choices=["park", "tsai", "horaud", "andreff", "daniilidis"],
+                   help="cv2.calibrateHandEye method (default park: as accurate as tsai on the test views, "
+                        "and tsai gives up on motions that rotate less than ~15 deg)")
     h.add_argument("--out", metavar="RIG.toml", help="rig file to write (default: update --rig)")
+    h.add_argument("--force", action="store_true",
+                   help=f"write the result even when the poses rotate less than {MIN_ROTATION_DEG:.0f} deg")
 
     w = sub.add_parser("water", help="the water surface height in the base frame",
                        description="Fit the water plane to boards floating on it, seen by the calibrated "
@@ -436,6 +441,8 @@ def run_hand_eye(args: argparse.Namespace) -> int:
     if len(used) < MIN_HAND_EYE_VIEWS:
         raise InputError(f"only {len(used)} views with the board found and a pose, need at least {MIN_HAND_EYE_VIEWS}")
     res = calibrate_hand_eye(T_bf, T_lb, args.method)
+    if res.max_rotation_deg < MIN_ROTATION_DEG and not args.force:
+        raise InputError(f"{res.warnings[0]} (nothing written; --force writes it anyway)")
     for w in res.warnings:
         print(f"photoservo calibrate: warning: {w}", file=sys.stderr)
     rv = np.degrees(cv2.Rodrigues(res.R)[0].ravel())

@@ -27,6 +27,7 @@ OUTLIER_FACTOR = 3.0       # a view is an outlier when its error > FACTOR x the 
 OUTLIER_FLOOR_PX = 1.0     # ... and > this many px
 MIN_HAND_EYE_VIEWS = 3
 MIN_ROTATION_DEG = 10.0    # hand-eye: the largest rotation between two poses must reach this
+MIN_SOLVABLE_ROTATION_DEG = 1.0  # below this there is nothing to solve (an error, not a warning)
 MIN_AXIS_SPREAD = 0.15     # hand-eye: 2nd/1st singular value of the motion axes (0 = one axis)
 HAND_EYE_METHODS = {
     "tsai": cv2.CALIB_HAND_EYE_TSAI,
@@ -246,13 +247,16 @@ def hand_eye_motion_warnings(T_base_flange: Sequence[np.ndarray]) -> tuple[list[
 
 
 def calibrate_hand_eye(T_base_flange: Sequence[np.ndarray], T_left_board: Sequence[np.ndarray],
-                       method: str = "tsai") -> HandEyeResult:
+                       method: str = "park") -> HandEyeResult:
     """Eye-in-hand calibration: the left camera on the flange, a board fixed in the world seen
     in each view. Solves AX = XB with cv2.calibrateHandEye (gripper = flange, target = board):
-    X = T_flange_left. Residuals as in `HandEyeResult`.
+    X = T_flange_left. Default method Park & Martin: as accurate as Tsai & Lenz on the rendered
+    views, and OpenCV's Tsai refuses sets whose motions rotate less than ~15 degrees. Residuals
+    as in `HandEyeResult`.
 
     Raises:
-        InputError: too few views, an unknown method, or no finite solution (degenerate poses).
+        InputError: too few views, an unknown method, poses that rotate less than
+            MIN_SOLVABLE_ROTATION_DEG (pure translation), or no solution from OpenCV.
     """
     n = len(T_base_flange)
     if n != len(T_left_board):
@@ -262,12 +266,20 @@ def calibrate_hand_eye(T_base_flange: Sequence[np.ndarray], T_left_board: Sequen
     if method not in HAND_EYE_METHODS:
         raise InputError(f"unknown hand-eye method '{method}' (choose {', '.join(HAND_EYE_METHODS)})")
     warnings, max_angle = hand_eye_motion_warnings(T_base_flange)
-    R_he, t_he = cv2.calibrateHandEye(
-        [T[:3, :3] for T in T_base_flange], [T[:3, 3] for T in T_base_flange],
-        [T[:3, :3] for T in T_left_board], [T[:3, 3] for T in T_left_board],
-        method=HAND_EYE_METHODS[method])
+    if max_angle < MIN_SOLVABLE_ROTATION_DEG:  # nothing to solve: OpenCV would return I, 0
+        raise InputError(warnings[0])
+    level = cv2.utils.logging.getLogLevel()
+    cv2.utils.logging.setLogLevel(cv2.utils.logging.LOG_LEVEL_SILENT)  # it logs instead of raising
+    try:
+        R_he, t_he = cv2.calibrateHandEye(
+            [T[:3, :3] for T in T_base_flange], [T[:3, 3] for T in T_base_flange],
+            [T[:3, :3] for T in T_left_board], [T[:3, 3] for T in T_left_board],
+            method=HAND_EYE_METHODS[method])
+    finally:
+        cv2.utils.logging.setLogLevel(level)
     R_he, t_he = np.asarray(R_he, float), np.asarray(t_he, float).ravel()
-    if not (np.all(np.isfinite(R_he)) and np.all(np.isfinite(t_he))) or abs(np.linalg.det(R_he) - 1) > 1e-3:
+    failed = np.array_equal(R_he, np.eye(3)) and not np.any(t_he)  # OpenCV's "not enough motion" answer
+    if failed or not (np.all(np.isfinite(R_he)) and np.all(np.isfinite(t_he))) or abs(np.linalg.det(R_he) - 1) > 1e-3:
         raise InputError("hand-eye calibration found no solution" + (f": {warnings[0]}" if warnings else ""))
     X = make_T(R_he, t_he)
     boards = [T_bf @ X @ T_lb for T_bf, T_lb in zip(T_base_flange, T_left_board)]
