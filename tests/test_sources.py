@@ -235,3 +235,15 @@ def test_cameras_section_errors_name_the_key(tmp_path):
         cameras(max_skew_ms=-1.0).validate("cameras")
     with pytest.raises(InputError, match=r"\[cameras\] \(videos\): left: video file not found"):
         source_config(cameras(kind="videos", left=str(tmp_path / "x.avi"), right=str(tmp_path / "y.avi")))
+
+
+def test_refused_device_settings_are_reported_not_fatal(tmp_path):
+    # A video file opened as a "device" accepts no exposure / white-balance lock: the source
+    # still delivers and says which settings the device refused.
+    left = write_video(tmp_path / "l.avi", 2, 10.0, 0)
+    right = write_video(tmp_path / "r.avi", 2, 10.0, 1)
+    cfg = OpenCVPairConfig(left, right, exposure=100.0, white_balance_k=4500.0, max_skew_s=0.5)
+    with make_source(cfg) as src:
+        assert len(list(src)) == 2
+    assert any("left: the device refused exposure=100.0" in w for w in src.warnings)
+    assert any("right: the device refused wb_temperature=4500.0" in w for w in src.warnings)
