@@ -1,0 +1,161 @@
+"""Sampling sweep (issue 2 item 9, "sampling sweep"): the paper notes that fewer sampling points
+are faster but may cost accuracy. For each photo-model sampling interval (px in the photo,
+`[photo_model] interval_px`, with `max_points` lifted so the interval is honoured), the same
+seeded synthetic scenes are estimated from the default search volume and we report:
+
+  points          median inner + outer sampling points of the photo-models
+  fit ms/gen      one fitness call, 30 individuals (median of repeated calls, first scene's model)
+  success         found and position error <= 5 % of the distance
+  pos %, depth %  median position / depth error in % of the distance (successful or not)
+  heading, tilt   median errors (deg), separately (vision/pose.heading_tilt_error)
+  size %          median |alpha_true / alpha_est - 1|
+  wall s          median wall seconds of `estimate` (loaded shared machine)
+
+Scenes: vision/synthetic.random_scene, squid / crab / fish in turn, 300-1500 mm, random heading
+and tilt up to 40 deg, effects waves, glints, noise, blur, white balance, chroma loss and bend;
+odd scenes give the estimator another individual's photo. Rule for the default: the fastest
+interval (median wall time) whose success rate is within 5 points of the best and whose median
+position, size, heading and tilt errors are each within 1.25x of the best (or the best plus a
+small absolute slack, SLACK); the table marks it.
+
+Prints a table and writes benchmarks/out/sampling_sweep.json.
+Run: /work/venv/bin/python benchmarks/sampling_sweep.py [--scenes 18] [--intervals 2,3,4,6,8,12]
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+import os
+import time
+from pathlib import Path
+
+import numpy as np
+
+from photoservo.fileio import write_text_atomic
+from photoservo.servo.config import load_config
+from photoservo.vision.estimator import estimate
+from photoservo.vision.fitness import fitness, stereo_hue
+from photoservo.vision.photo_model import build_photo_model
+from photoservo.vision.pose import heading_tilt_error
+from photoservo.vision.synthetic import random_scene
+
+KINDS = ("squid", "crab", "fish")
+EFFECTS = ("waves", "glints", "noise", "blur", "white-balance", "chroma", "bend")
+SUCCESS_POS_FRAC = 0.05
+# A median error is "close to the best" within 1.25x the best or the best plus this slack.
+SLACK = {"pos_pct": 0.25, "size_pct": 0.5, "heading_deg": 0.5, "tilt_deg": 2.0}
+
+
+def fitness_ms(model, frame, rig, fit_params, truth, repeats: int = 100) -> float:
+    """Median ms of one fitness call scoring 30 individuals around the truth."""
+    rng = np.random.default_rng(0)
+    R0, t0 = np.array(truth["rotation"]), np.array(truth["position_mm"])
+    R = np.repeat(R0[None], 30, axis=0)
+    t = t0 + rng.normal(0, 20, (30, 3))
+    alpha = truth["alpha_px_per_mm"] * np.exp(rng.normal(0, 0.1, 30))
+    fitness(R, t, alpha, model, frame, rig, fit_params)
+    times = []
+    for _ in range(repeats):
+        w0 = time.perf_counter()
+        fitness(R, t, alpha, model, frame, rig, fit_params)
+        times.append(time.perf_counter() - w0)
+    return float(np.median(times) * 1e3)
+
+
+def errors(truth: dict, est) -> dict:
+    d = float(truth["distance_mm"])
+    if not est.found:
+        return {"found": False, "success": False}
+    t_true, t_est = np.array(truth["position_mm"]), np.asarray(est.position_mm)
+    heading, tilt = heading_tilt_error(np.array(truth["rotation"]), np.asarray(est.rotation))
+    pos = float(np.linalg.norm(t_est - t_true))
+    return {"found": True, "success": pos <= SUCCESS_POS_FRAC * d,
+            "pos_pct": 100 * pos / d, "pos_mm": pos, "depth_pct": 100 * abs(t_est[2] - t_true[2]) / d,
+            "heading_deg": heading, "tilt_deg": tilt,
+            "size_pct": 100 * abs(truth["alpha_px_per_mm"] / est.alpha_px_per_mm - 1)}
+
+
+def med(rows: list[dict], key: str) -> float | None:
+    vals = [r[key] for r in rows if key in r]
+    return float(np.median(vals)) if vals else None
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--scenes", type=int, default=18, help="seeded scenes per interval")
+    ap.add_argument("--intervals", default="2,3,4,6,8,12", help="sampling intervals to compare (px)")
+    args = ap.parse_args()
+    intervals = [float(x) for x in args.intervals.split(",")]
+
+    cfg = load_config()
+    load_before = os.getloadavg()
+    scenes = []
+    for i in range(args.scenes):
+        sc = random_scene(2000 + i, cfg.synthetic, cfg.photo_model, kind=KINDS[i % 3], other_photo=bool(i % 2),
+                          effects=EFFECTS)
+        scenes.append((sc, stereo_hue(sc.left, sc.right, cfg.fitness)))
+
+    table = []
+    for iv in intervals:
+        pm = dataclasses.replace(cfg.photo_model, interval_px=iv, max_points=10**6)
+        rows = []
+        for i, (sc, frame) in enumerate(scenes):
+            model = build_photo_model(sc.photo, pm)
+            if i == 0:
+                fit_ms = fitness_ms(model, frame, sc.rig, cfg.fitness, sc.truth)
+            est = estimate(model, sc.left, sc.right, sc.rig, cfg.ga, cfg.estimator, cfg.fitness, seed=i,
+                           frame=frame)
+            rows.append({"scene": i, "points": len(model.inner_uv) + len(model.outer_uv),
+                         "seconds": est.seconds, "generations": est.generations,
+                         **errors(sc.truth, est)})
+        entry = {"interval_px": iv, "points": med(rows, "points"), "fitness_ms_per_generation": fit_ms,
+                 "success_rate": sum(r["success"] for r in rows) / len(rows),
+                 "found_rate": sum(r["found"] for r in rows) / len(rows),
+                 **{k: med(rows, k) for k in ("pos_pct", "depth_pct", "heading_deg", "tilt_deg",
+                                              "size_pct", "seconds", "generations")},
+                 "scenes": rows}
+        table.append(entry)
+        print(f"interval {iv:g} px done: success {entry['success_rate']:.0%}, wall {entry['seconds']:.2f} s",
+              flush=True)
+    load_after = os.getloadavg()
+
+    best_success = max(e["success_rate"] for e in table)
+    best = {k: min(e[k] for e in table if e[k] is not None) for k in SLACK}
+
+    def close_to_best(e: dict) -> bool:
+        return e["success_rate"] >= best_success - 0.05 and all(
+            e[k] is not None and e[k] <= max(1.25 * best[k], best[k] + slack) for k, slack in SLACK.items())
+
+    pick = min([e for e in table if close_to_best(e)] or table, key=lambda e: e["seconds"])
+
+    print(f"\nsampling sweep: {args.scenes} scenes per interval, load average {load_before[0]:.2f} -> "
+          f"{load_after[0]:.2f} on {os.cpu_count()} CPUs (shared machine)")
+    hdr = (f"{'interval':>8}{'points':>8}{'fit ms/gen':>11}{'success':>9}{'pos %':>7}{'depth %':>8}"
+           f"{'heading':>8}{'tilt':>6}{'size %':>7}{'gens':>6}{'wall s':>8}")
+    print(hdr)
+    print("-" * len(hdr))
+
+    def f(v, fmt):
+        return format(v, fmt) if v is not None else "-"
+
+    for e in table:
+        mark = "  <- pick" if e is pick else ""
+        print(f"{e['interval_px']:>8g}{f(e['points'], '8.0f')}{e['fitness_ms_per_generation']:>11.3f}"
+              f"{e['success_rate']:>9.0%}{f(e['pos_pct'], '7.2f')}{f(e['depth_pct'], '8.2f')}"
+              f"{f(e['heading_deg'], '8.2f')}{f(e['tilt_deg'], '6.1f')}{f(e['size_pct'], '7.2f')}"
+              f"{f(e['generations'], '6.0f')}{f(e['seconds'], '8.2f')}{mark}")
+    print(f"pick: interval {pick['interval_px']:g} px — the fastest whose success rate is within 5 points "
+          f"of the best ({best_success:.0%}) and whose median position, size, heading and tilt errors are "
+          f"within 1.25x (or {SLACK}) of the best; configured default: {cfg.photo_model.interval_px:g} px")
+    out = Path(__file__).parent / "out" / "sampling_sweep.json"
+    write_text_atomic(out, json.dumps({
+        "scenes": args.scenes, "effects": EFFECTS, "load_average_before": load_before,
+        "load_average_after": load_after, "cpus": os.cpu_count(), "pick_interval_px": pick["interval_px"],
+        "configured_interval_px": cfg.photo_model.interval_px, "rows": table}, indent=1))
+    print(f"wrote {out}")
+
+
+if __name__ == "__main__":
+    main()
