@@ -16,6 +16,8 @@ like a real camera), it records N stereo frames through `Recorder` and reports:
   MB/min           file size per minute of 30 fps stereo
   read fps         `replay_io.iter_frames` read-back speed (stereo frames/s, decoded)
   exact            frames read back bit-equal to those logged
+and the per-frame cost of the other logs of a tracking frame (estimate with projected points,
+timings, 17 arm samples of a 500 Hz control loop).
 
 Prints a table and writes benchmarks/out/recording.json (median of `--repeats` runs).
 Run: /work/venv/bin/python benchmarks/recording.py [--frames 150] [--repeats 3]
@@ -97,6 +99,39 @@ def run_once(frames: list, mode: str, n: int, folder: Path) -> dict:
             "read_fps": count / read, "exact": exact and count == n}
 
 
+def other_costs(folder: Path, n: int = 300) -> dict:
+    """Per-call cost of the non-image logs of one tracking frame: log_estimate (with the
+    projected points of a 1500-point model), log_timings (5 stages), and 17 log_arm calls
+    (500 Hz control at 30 fps) whose flush happens in the next log_frame."""
+    from photoservo.vision.fitness import project_model
+    photo = specimen("squid", 0)
+    model = build_photo_model(photo, load_config().photo_model)
+    rig = synthetic_rig()
+    proj = project_model(np.eye(3), np.array([0.0, 0.0, 600.0]), 2.0, model, rig)
+    small = np.zeros((8, 8, 3), np.uint8)
+    est, arm, frame = [], [], []
+    with Recorder.open(folder / "costs.rrd", "bench") as rec:
+        for k in range(n):
+            t = k / FPS
+            t0 = time.perf_counter()
+            for j in range(17):
+                rec.log_arm(t + j / 500, np.full(7, 0.1), np.full(7, 0.1), np.full(7, 0.1))
+            t1 = time.perf_counter()
+            rec.log_frame(k, t, small, small)      # tiny frames: this is the arm flush + metadata
+            t2 = time.perf_counter()
+            rec.log_estimate(k, t, found=True, fitness=0.8, R=np.eye(3), position_mm=[0, 0, 600.0],
+                             alpha=2.0, size_mm=model.size_mm(2.0), projection=proj)
+            rec.log_timings(t, {"capture": 1.0, "ga": 20.0, "control": 0.5, "record": 2.0, "total": 25.0})
+            t3 = time.perf_counter()
+            arm.append((t1 - t0) / 17)
+            frame.append(t2 - t1)
+            est.append(t3 - t2)
+    return {"log_arm_us": 1e6 * statistics.median(arm),
+            "arm_flush_and_frame_meta_ms": 1e3 * statistics.median(frame),
+            "log_estimate_and_timings_ms": 1e3 * statistics.median(est),
+            "points_per_camera": len(model.inner_uv) + len(model.outer_uv)}
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--frames", type=int, default=150)
@@ -112,6 +147,7 @@ def main() -> int:
                        **{k: statistics.median(r[k] for r in runs) for k in runs[0] if k != "exact"},
                        "exact": all(r["exact"] for r in runs)}
                 results.append(row)
+        costs = other_costs(Path(tmp))
     head = f"{'frames':20s} {'mode':9s} {'loop ms':>8s} {'total ms':>9s} {'cpu ms':>7s} {'enc ms':>7s} {'MB/min':>8s} {'read fps':>9s} exact"
     print(f"Recording 640x480 stereo @ {FPS:.0f} fps, {args.frames} frames x {args.repeats} runs (median); "
           f"{os.cpu_count()} CPUs, machine shared with other engineers (loaded)")
@@ -119,10 +155,14 @@ def main() -> int:
     for r in results:
         print(f"{r['scene']:20s} {r['mode']:9s} {r['loop_ms']:8.2f} {r['total_ms']:9.2f} {r['cpu_ms']:7.2f} {r['encode_ms']:7.2f} "
               f"{r['mb_per_min']:8.0f} {r['read_fps']:9.1f} {'yes' if r['exact'] else 'NO'}")
+    print(f"per frame besides the images: log_estimate + log_timings {costs['log_estimate_and_timings_ms']:.2f} ms "
+          f"({costs['points_per_camera']} model points per camera), 17 x log_arm "
+          f"{costs['log_arm_us']:.1f} us each + their flush with the frame metadata "
+          f"{costs['arm_flush_and_frame_meta_ms']:.2f} ms")
     out = Path(__file__).parent / "out" / "recording.json"
     write_text_atomic(out, json.dumps({"fps": FPS, "size": [640, 480], "frames": args.frames,
                                        "repeats": args.repeats, "load_note": "shared 2-core machine, loaded",
-                                       "results": results}, indent=1) + "\n")
+                                       "results": results, "other_costs": costs}, indent=1) + "\n")
     print(f"wrote {out}")
     return 0
 

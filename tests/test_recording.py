@@ -387,14 +387,18 @@ def test_projected_points_and_desired_pose_are_drawn(tmp_path: Path):
                          size_mm=model.size_mm(alpha), projection=proj)
         rec.log_desired(0.0, np.eye(4), frame=0)
     assert verify_rrd(path)[0]
-    pts = {}
+    pts, ids = {}, {}
     for c in RrdReader(path).stream():
         rb = c.to_record_batch()
         if "Points2D:positions" in rb.schema.names and not c.is_static:
             pts[c.entity_path] = np.array(rb.column("Points2D:positions")[0].values.to_pylist())
-    assert set(pts) == {f"/world/rig/{s}/{k}" for s in ("left", "right") for k in ("inner", "outer")}
-    assert np.allclose(pts["/world/rig/left/inner"], proj.inner_left[0], atol=1e-3)   # float32
-    assert len(pts["/world/rig/right/outer"]) == len(model.outer_uv)
+            ids[c.entity_path] = np.array(rb.column("Points2D:class_ids")[0].values.to_pylist())
+    assert set(pts) == {"/world/rig/left/model", "/world/rig/right/model"}
+    left, right = pts["/world/rig/left/model"], ids["/world/rig/right/model"]
+    n_in = len(model.inner_uv)
+    assert np.allclose(left[:n_in], proj.inner_left[0], atol=1e-3)             # float32
+    assert np.allclose(left[n_in:], proj.outer_left[0], atol=1e-3)
+    assert (right == 0).sum() == n_in and (right == 1).sum() == len(model.outer_uv)
 
 
 def test_recording_config_section(tmp_path: Path):

@@ -27,19 +27,20 @@ Entity tree (mm, rad; `world` is the PA-10 base frame, z up)::
     world/rig                  Transform3D T_base_left (the left camera; per frame, when known)
     world/rig/left             Pinhole K, camera_xyz RDF (X right, Y down, Z forward) (static)
     world/rig/left/image       the left frame (raw / PNG / JPEG, see modes)
-    world/rig/left/inner|outer Points2D: the best model's projected inner / outer points
+    world/rig                  AnnotationContext: class 0 inner (green), 1 outer (magenta)
+    world/rig/left/model       Points2D: the best model's projected inner and outer points
     world/rig/right            Transform3D X_right = R X_left + T (static) + Pinhole
     world/rig/right/...        as left
-    world/target/estimate      Transform3D T_base_model + Boxes3D (size_mm, flat)
+    world/target/estimate      Transform3D T_base_model + axes + Boxes3D (size_mm, flat)
     world/target/truth         the same for the simulator's ground truth
     world/target/desired       Transform3D T_base_cam_desired + axes
     world/flange/path          LineStrips3D, the flange's last `PATH_S` seconds, at 2 Hz
     plots/fitness|alpha|found  Scalars
     timing/<stage>_ms          Scalars
-    arm/q|setpoint|command     Scalars, 7 named series (S1..W2) per entity (one log per tick,
-                               not 21)
+    arm/q|setpoint|command     Scalars, 7 named series (S1..W2) per entity (not 21 entities)
     events                     TextLog
-    data/frame|estimate|truth  AnyValues with the exact float64 numbers replay reads back
+    data/frame|estimate|truth  AnyValues `values`: the exact float64 numbers replay reads
+                               back, one vector per row laid out by FRAME/EST/TRUTH_LAYOUT
     setup/run                  TextDocument JSON: verb, mode, replayable, seed, versions, ...
     setup/rig|config           TextDocument: the rig TOML, the effective config TOML
     setup/photo_model          AnyValues npz: the PhotoModel arrays, bit-exact
@@ -51,7 +52,12 @@ frustums and the 2-D views (origin `world/rig/left`) show them with the projecte
 second copy at `images/left` would double the file (see the benchmark for MB per minute).
 
 Timelines: `frame` (sequence: the loop's frame index) and `time` (duration, seconds on the
-loop's monotonic clock). Arm, timing and event logs carry `time` only.
+loop's monotonic clock). Arm and event logs carry `time` only.
+
+Cost: every rerun log call costs ~0.1-0.2 ms of Python, so the time series (plots/, timing/,
+arm/) are queued and written as column chunks every SERIES_FLUSH_S (the live view lags by that
+much), the arm is redrawn at most every ARM_DRAW_PERIOD_S, and a frame with its estimate is
+about 8 log calls. `log_arm` only queues, so a control thread may call it.
 
 Modes (chosen from `benchmarks/recording.py`, 640x480 stereo at 30 fps, on this 2-core
 machine while loaded: CPU ms per stereo frame, whole process / MB per minute, clean synthetic
@@ -140,7 +146,9 @@ JPEG_QUALITY = 90
 PATH_S = 10.0          # seconds of flange path kept in `world/flange/path`
 PATH_PERIOD_S = 0.5    # how often the path strip is re-logged
 SPAWN_WAIT_S = 5.0     # longest wait for a spawned viewer to listen
-ARM_BATCH = 250        # queued arm samples written at once when no frames come (0.5 s at 500 Hz)
+SERIES_FLUSH_S = 0.5   # queued time series (plots, timings, arm) are written this often
+ARM_BATCH = 750        # ...or, when no frames come (move), at this many queued samples
+ARM_DRAW_PERIOD_S = 0.1   # the arm is redrawn at most this often
 JOINT_NAMES = ("S1", "S2", "S3", "E1", "E2", "W1", "W2")
 PREVIEW_WARNING = ("PREVIEW RECORDING: frames are JPEG (lossy, hue changes). This recording "
                    "is for viewing only and CANNOT be replayed.")
@@ -247,6 +255,35 @@ def encode_frame(bgr: np.ndarray, mode: str) -> Any:
     return rr.EncodedImage(contents=buf.tobytes(), media_type=media)
 
 
+#: Per-frame numbers replay reads back exactly, one float64 vector per row (NaN = absent):
+#: one AnyValues component instead of one per field (each costs ~0.2 ms of Python in rerun).
+FRAME_LAYOUT = (("capture_times", 2), ("T_base_left", 16))
+EST_LAYOUT = (("found", 1), ("fitness", 1), ("generations", 1), ("alpha", 1), ("rotation", 9),
+              ("position_mm", 3), ("size_mm", 2), ("T_base_left", 16))
+TRUTH_LAYOUT = (("T_base_target", 16), ("size_mm", 2))
+
+
+def pack(layout: tuple[tuple[str, int], ...], values: Mapping[str, Any]) -> np.ndarray:
+    """`values` laid out in one float64 vector by `layout` ((name, length), ...); a missing
+    or None value becomes NaNs."""
+    parts = []
+    for name, n in layout:
+        v = values.get(name)
+        parts.append(np.full(n, np.nan) if v is None else np.asarray(v, dtype=np.float64).reshape(n))
+    return np.concatenate(parts)
+
+
+def unpack(layout: tuple[tuple[str, int], ...], vec: np.ndarray) -> dict[str, np.ndarray | None]:
+    """Inverse of `pack`: name -> its values, or None when they were absent."""
+    out: dict[str, np.ndarray | None] = {}
+    i = 0
+    for name, n in layout:
+        part = np.asarray(vec[i:i + n], dtype=np.float64)
+        out[name] = None if np.isnan(part).all() else part
+        i += n
+    return out
+
+
 def pack_arrays(obj: Any) -> bytes:
     """A dataclass of arrays / numbers / tuples as npz bytes (bit-exact, self-describing)."""
     arrays = {f.name: np.asarray(getattr(obj, f.name)) for f in dataclasses.fields(obj)}
@@ -304,7 +341,10 @@ class Recorder:
         self._seg_t0: float | None = None
         self._path_pts: deque[tuple[float, np.ndarray]] = deque()
         self._path_last_t = -math.inf
-        self._arm_pending: deque[tuple] = deque()   # log_arm samples not yet written
+        self._series: deque[tuple] = deque()   # (entity, t, frame, values) not yet written
+        self._series_flushed_t = -math.inf
+        self._arm_last: tuple[float, np.ndarray] | None = None
+        self._arm_drawn_t = -math.inf
         self._closed = False
         self._error: BaseException | None = None
         self.frames_logged = 0
@@ -316,6 +356,9 @@ class Recorder:
             self._grpc_url = connect_url or self._spawn_viewer()
         self._open_file(self._next_file())
         self._log_static("world", rr.ViewCoordinates.RIGHT_HAND_Z_UP)
+        self._log_static("world/rig", rr.AnnotationContext([
+            rr.AnnotationInfo(id=0, label="inner", color=(0, 255, 0)),
+            rr.AnnotationInfo(id=1, label="outer", color=(255, 0, 255))]))
         self._log_static("arm/q", rr.SeriesLines(names=list(JOINT_NAMES)))
         self._log_static("arm/setpoint", rr.SeriesLines(names=list(JOINT_NAMES)))
         self._log_static("arm/command", rr.SeriesLines(names=list(JOINT_NAMES)))
@@ -392,7 +435,9 @@ class Recorder:
         finally:
             with self._lock:
                 try:
-                    self._flush_arm()
+                    self._flush_series()
+                    if self._arm_last is not None:
+                        self._draw_arm(*self._arm_last)
                 finally:
                     self._finish_file()
         if self._error is not None:
@@ -469,7 +514,7 @@ class Recorder:
             return
         if self._queue is not None:
             self._queue.join()   # this segment's frames land in this segment
-        self._flush_arm()
+        self._flush_series(t)
         with self._lock:
             self._finish_file()
             self._open_file(self._next_file())
@@ -525,7 +570,9 @@ class Recorder:
                 "versions": dict(versions or software_versions()),
                 "recording_id": self.recording_id, "segment_s": self.segment_s,
                 "started_utc": datetime.now(UTC).isoformat(timespec="seconds"),
-                "png_params": PNG_PARAMS if self.mode == "png" else None}
+                "png_params": PNG_PARAMS if self.mode == "png" else None,
+                "layouts": {E_DATA_FRAME: FRAME_LAYOUT, E_DATA_EST: EST_LAYOUT,
+                            E_DATA_TRUTH: TRUTH_LAYOUT}}
 
     # --- static setup ---------------------------------------------------------------------
 
@@ -580,14 +627,14 @@ class Recorder:
         self._check()
         self._maybe_rotate(t)
         self._last_t = t
-        self._flush_arm()
-        extra = {}
-        if capture_times is not None:
-            extra["t_left"], extra["t_right"] = float(capture_times[0]), float(capture_times[1])
+        if t - self._series_flushed_t >= SERIES_FLUSH_S:
+            self._flush_series(t)
+        if self._arm_last is not None and t - self._arm_drawn_t >= ARM_DRAW_PERIOD_S:
+            self._draw_arm(*self._arm_last)
         if T_base_left is not None:
-            extra["T_base_left"] = np.asarray(T_base_left, dtype=np.float64).ravel()
             self._log("world/rig", t, frame, _transform(T_base_left))
-        self._log(E_DATA_FRAME, t, frame, rr.AnyValues(index=int(frame), **extra))
+        self._log(E_DATA_FRAME, t, frame, rr.AnyValues(values=pack(FRAME_LAYOUT, {
+            "capture_times": capture_times, "T_base_left": T_base_left})))
         for side, img in (("left", left_bgr), ("right", right_bgr)):
             if self._queue is not None:
                 t0 = time.perf_counter()
@@ -605,49 +652,48 @@ class Recorder:
         """The tracker's best individual for a frame: pose "model in left camera"
         (X_left = R X_model + position_mm), alpha (px/mm), size_mm, fitness, found.
         projection: its projected points (`vision.fitness.ModelProjection`: inner_left,
-        outer_left, inner_right, outer_right, px), drawn on the images when given.
+        outer_left, inner_right, outer_right, px), drawn on the images when given (one
+        Points2D per camera, class 0 = inner, 1 = outer, colours from the AnnotationContext).
         T_base_left places the model in the base frame for the 3-D view and truth errors."""
         self._check()
         self._last_t = t
-        self._log("plots/fitness", t, frame, rr.Scalars(float(fitness)))
-        self._log("plots/found", t, frame, rr.Scalars(1.0 if found else 0.0))
-        vals: dict[str, Any] = {"found": bool(found), "fitness": float(fitness),
-                                "generations": int(generations)}
-        if found and R is not None and position_mm is not None:
-            R = np.asarray(R, dtype=np.float64)
-            p = np.asarray(position_mm, dtype=np.float64)
-            vals["rotation"], vals["position_mm"] = R.ravel(), p
+        self._queue_scalar("plots/fitness", t, frame, float(fitness))
+        self._queue_scalar("plots/found", t, frame, 1.0 if found else 0.0)
+        posed = found and R is not None and position_mm is not None
+        if posed:
             if alpha is not None:
-                vals["alpha"] = float(alpha)
-                self._log("plots/alpha", t, frame, rr.Scalars(float(alpha)))
-            if size_mm is not None:
-                vals["size_mm"] = np.asarray(size_mm, dtype=np.float64)
-            T_left_model = _T(R, p)
+                self._queue_scalar("plots/alpha", t, frame, float(alpha))
+            T_left_model = _T(np.asarray(R, dtype=np.float64), np.asarray(position_mm, dtype=np.float64))
             T_base_model = T_left_model if T_base_left is None else np.asarray(T_base_left) @ T_left_model
-            if T_base_left is not None:
-                vals["T_base_left"] = np.asarray(T_base_left, dtype=np.float64).ravel()
             self._log_box("world/target/estimate", t, frame, T_base_model, size_mm, [255, 140, 0])
         else:
-            self._log("world/target/estimate", t, frame, rr.Clear(recursive=True))
+            self._log("world/target/estimate", t, frame, rr.Clear(recursive=False))
         for side in ("left", "right"):
-            for kind, color in (("inner", [0, 255, 0]), ("outer", [255, 0, 255])):
-                ent = f"{E_CAM[side]}/{kind}"
-                uv = getattr(projection, f"{kind}_{side}", None) if (found and projection is not None) else None
-                if uv is None:
-                    self._log(ent, t, frame, rr.Clear(recursive=False))
-                else:
-                    uv = np.asarray(uv, dtype=np.float64).reshape(-1, 2)
-                    self._log(ent, t, frame, rr.Points2D(uv[np.isfinite(uv).all(axis=1)],
-                                                         colors=color, radii=1.5))
-        self._log(E_DATA_EST, t, frame, rr.AnyValues(**vals))
+            ent = f"{E_CAM[side]}/model"
+            if found and projection is not None:
+                inner = np.asarray(getattr(projection, f"inner_{side}"), dtype=np.float64).reshape(-1, 2)
+                outer = np.asarray(getattr(projection, f"outer_{side}"), dtype=np.float64).reshape(-1, 2)
+                uv = np.concatenate([inner, outer])
+                ids = np.concatenate([np.zeros(len(inner), np.uint16), np.ones(len(outer), np.uint16)])
+                ok = np.isfinite(uv).all(axis=1)
+                self._log(ent, t, frame, rr.Points2D(uv[ok], class_ids=ids[ok], radii=1.5))
+            else:
+                self._log(ent, t, frame, rr.Clear(recursive=False))
+        self._log(E_DATA_EST, t, frame, rr.AnyValues(values=pack(EST_LAYOUT, {
+            "found": float(bool(found)), "fitness": fitness, "generations": generations,
+            "alpha": alpha if posed else None, "rotation": R if posed else None,
+            "position_mm": position_mm if posed else None, "size_mm": size_mm if posed else None,
+            "T_base_left": T_base_left})))
 
     def _log_box(self, entity: str, t: float, frame: int | None, T: np.ndarray,
                  size_mm: Any, color: list[int]) -> None:
-        self._log(entity, t, frame, _transform(T), rr.TransformAxes3D(axis_length=30.0))
+        """A pose (T_base_model) with axes and, if the size is known, the flat model box
+        (drawn in the model frame: the entity's own transform applies to it)."""
+        parts = [_transform(T), rr.TransformAxes3D(axis_length=30.0)]
         if size_mm is not None:
             w, h = (float(s) for s in size_mm)
-            self._log(f"{entity}/box", t, frame,
-                      rr.Boxes3D(half_sizes=[[w / 2, h / 2, 1.0]], colors=[color]))
+            parts.append(rr.Boxes3D(half_sizes=[[w / 2, h / 2, 1.0]], colors=[color]))
+        self._log(entity, t, frame, *parts)
 
     def log_truth(self, frame: int, t: float, T_base_target: np.ndarray,
                   size_mm: tuple[float, float] | None = None) -> None:
@@ -655,10 +701,8 @@ class Recorder:
         self._check()
         T = np.asarray(T_base_target, dtype=np.float64)
         self._log_box("world/target/truth", t, frame, T, size_mm, [0, 200, 255])
-        vals: dict[str, Any] = {"T_base_target": T.ravel()}
-        if size_mm is not None:
-            vals["size_mm"] = np.asarray(size_mm, dtype=np.float64)
-        self._log(E_DATA_TRUTH, t, frame, rr.AnyValues(**vals))
+        self._log(E_DATA_TRUTH, t, frame, rr.AnyValues(values=pack(TRUTH_LAYOUT, {
+            "T_base_target": T, "size_mm": size_mm})))
 
     def log_desired(self, t: float, T_base_cam_desired: np.ndarray, frame: int | None = None) -> None:
         """The desired (left) camera pose of the servo law, in the base frame (4x4, mm)."""
@@ -671,37 +715,70 @@ class Recorder:
         """Joint state q (rad), the motion setpoint and the command sent (rad), at time t.
 
         Cheap enough for the control thread: the sample is only queued (a deque append, no
-        rerun call, no lock). Queued samples are written as columns (one chunk per series) at
-        the next `log_frame`, every `ARM_BATCH` samples when no frames come (the `move` verb),
-        before a new segment and at close; the arm is drawn (forward kinematics of the last q)
-        and the flange path extended at the same time."""
+        rerun call, no lock). Queued series are written as columns every `SERIES_FLUSH_S` of
+        frames, every `ARM_BATCH` samples when no frames come (the `move` verb), before a new
+        segment and at close. The arm (forward kinematics of the latest q) is drawn at most
+        every `ARM_DRAW_PERIOD_S`, with the flange path."""
         self._check()
-        self._arm_pending.append((float(t), np.array(q, dtype=np.float64),
-                                  None if setpoint is None else np.array(setpoint, dtype=np.float64),
-                                  None if command is None else np.array(command, dtype=np.float64)))
-        if len(self._arm_pending) >= ARM_BATCH:
-            self._flush_arm()
+        q = np.array(q, dtype=np.float64)
+        self._series.append(("arm/q", float(t), None, q))
+        if setpoint is not None:
+            self._series.append(("arm/setpoint", float(t), None, np.array(setpoint, dtype=np.float64)))
+        if command is not None:
+            self._series.append(("arm/command", float(t), None, np.array(command, dtype=np.float64)))
+        self._arm_last = (float(t), q)
+        if len(self._series) >= ARM_BATCH and self._last_t < t - SERIES_FLUSH_S:   # no frames come
+            self._flush_series(t)
+            self._draw_arm(float(t), q)
 
-    def _flush_arm(self) -> None:
-        """Write the queued arm samples (see `log_arm`)."""
+    def log_timings(self, t: float, timings_ms: Mapping[str, float], frame: int | None = None) -> None:
+        """Per-stage durations of one loop iteration (ms), as `timing/<stage>_ms` (queued like
+        the other series)."""
+        self._check()
+        for stage, ms in timings_ms.items():
+            self._queue_scalar(f"timing/{stage}_ms", t, frame, float(ms))
+
+    def event(self, t: float, text: str, level: str = "INFO") -> None:
+        """A line in the `events` text log (level: TRACE DEBUG INFO WARN ERROR CRITICAL)."""
+        self._log(E_EVENTS, t, None, rr.TextLog(text, level=level))
+
+    # --- batched series ---------------------------------------------------------------------
+
+    def _queue_scalar(self, entity: str, t: float, frame: int | None, value: float) -> None:
+        self._series.append((entity, float(t), frame, np.array([value])))
+
+    def _flush_series(self, t: float | None = None) -> None:
+        """Write the queued time series as one column chunk per entity (`send_columns`: a log
+        call costs ~0.1-0.2 ms of Python in rerun, a column chunk about the same for any
+        number of rows)."""
         rows = []
         while True:
             try:
-                rows.append(self._arm_pending.popleft())
+                rows.append(self._series.popleft())
             except IndexError:
                 break
+        if t is not None:
+            self._series_flushed_t = t
         if not rows:
             return
-        from photoservo.robot.pa10 import fk_frames
-        ts = np.array([r[0] for r in rows])
+        by_entity: dict[str, list[tuple]] = {}
+        for r in rows:
+            by_entity.setdefault(r[0], []).append(r)
         with self._lock:
-            for k, name in ((1, "arm/q"), (2, "arm/setpoint"), (3, "arm/command")):
-                sel = [i for i, r in enumerate(rows) if r[k] is not None]
-                if sel:
-                    self._rec.send_columns(name, indexes=[rr.TimeColumn("time", duration=ts[sel])],
-                                           columns=rr.Scalars.columns(scalars=np.array([rows[i][k] for i in sel])))
-            t = float(ts[-1])
-            frames = fk_frames(rows[-1][1])
+            for entity, rs in by_entity.items():
+                indexes = [rr.TimeColumn("time", duration=[r[1] for r in rs])]
+                if all(r[2] is not None for r in rs):
+                    indexes.append(rr.TimeColumn("frame", sequence=[int(r[2]) for r in rs]))
+                values = np.array([r[3] for r in rs])
+                self._rec.send_columns(entity, indexes=indexes,
+                                       columns=rr.Scalars.columns(scalars=values))
+
+    def _draw_arm(self, t: float, q: np.ndarray) -> None:
+        """The arm's link frames and skeleton at joint angles q, and the flange path."""
+        from photoservo.robot.pa10 import fk_frames
+        frames = fk_frames(q)
+        self._arm_drawn_t = t
+        with self._lock:
             self._rec.reset_time()
             self._rec.set_time("time", duration=t)
             for i, T in enumerate(frames):
@@ -715,13 +792,3 @@ class Recorder:
                 self._path_last_t = t
                 self._rec.log("world/flange/path", rr.LineStrips3D(
                     [np.array([p for _, p in self._path_pts])], radii=2.0, colors=[[255, 255, 0]]))
-
-    def log_timings(self, t: float, timings_ms: Mapping[str, float], frame: int | None = None) -> None:
-        """Per-stage durations of one loop iteration (ms), as `timing/<stage>_ms`."""
-        self._check()
-        for stage, ms in timings_ms.items():
-            self._log(f"timing/{stage}_ms", t, frame, rr.Scalars(float(ms)))
-
-    def event(self, t: float, text: str, level: str = "INFO") -> None:
-        """A line in the `events` text log (level: TRACE DEBUG INFO WARN ERROR CRITICAL)."""
-        self._log(E_EVENTS, t, None, rr.TextLog(text, level=level))

@@ -281,6 +281,13 @@ def _blob(rb: pa.RecordBatch, name: str, i: int) -> bytes | None:
     return v.flatten().to_numpy(zero_copy_only=False).tobytes()
 
 
+def _packed(rb: pa.RecordBatch, layout: tuple[tuple[str, int], ...]) -> list[dict]:
+    """The `values` vectors of a data/ chunk, unpacked by `layout` (see recording.pack)."""
+    width = sum(n for _, n in layout)
+    flat = rb.column("values").flatten().to_numpy(zero_copy_only=False)
+    return [R_.unpack(layout, row) for row in flat.reshape(-1, width)]
+
+
 def _scalar_rows(rb: pa.RecordBatch) -> np.ndarray:
     """The `Scalars:scalars` column of a chunk as an (N, K) array (vectorised: the arm series
     run at the control rate)."""
@@ -381,28 +388,24 @@ def read_recording(path: str | Path, *, images: bool = False) -> Recording:
         elif ep == R_.E_MODEL and model is None:
             model = _unpack_model(_blob(rb, "npz", n - 1))
         elif ep == R_.E_DATA_FRAME:
-            for i in range(n):
-                T = _num(rb, "T_base_left", i)
-                tl, tr = _scalar(rb, "t_left", i), _scalar(rb, "t_right", i)
+            for i, v in enumerate(_packed(rb, R_.FRAME_LAYOUT)):
+                ct, T = v["capture_times"], v["T_base_left"]
                 frames[int(frame[i])] = FrameMeta(
                     int(frame[i]), float(t[i]), None if T is None else T.reshape(4, 4),
-                    None if tl is None else (tl, tr))
+                    None if ct is None else (float(ct[0]), float(ct[1])))
         elif ep == R_.E_DATA_EST:
-            for i in range(n):
-                rot, T = _num(rb, "rotation", i), _num(rb, "T_base_left", i)
+            for i, v in enumerate(_packed(rb, R_.EST_LAYOUT)):
+                rot, T, a = v["rotation"], v["T_base_left"], v["alpha"]
                 estimates[int(frame[i])] = EstimateRecord(
-                    frame=int(frame[i]), t=float(t[i]), found=bool(_scalar(rb, "found", i)),
-                    fitness=float(_scalar(rb, "fitness", i)),
-                    generations=int(_scalar(rb, "generations", i) or 0),
+                    frame=int(frame[i]), t=float(t[i]), found=bool(v["found"][0]),
+                    fitness=float(v["fitness"][0]), generations=int(v["generations"][0]),
                     rotation=None if rot is None else rot.reshape(3, 3),
-                    position_mm=_num(rb, "position_mm", i), alpha=_scalar(rb, "alpha", i),
-                    size_mm=_num(rb, "size_mm", i),
-                    T_base_left=None if T is None else T.reshape(4, 4))
+                    position_mm=v["position_mm"], alpha=None if a is None else float(a[0]),
+                    size_mm=v["size_mm"], T_base_left=None if T is None else T.reshape(4, 4))
         elif ep == R_.E_DATA_TRUTH:
-            for i in range(n):
+            for i, v in enumerate(_packed(rb, R_.TRUTH_LAYOUT)):
                 truth[int(frame[i])] = TruthRecord(int(frame[i]), float(t[i]),
-                                                   _num(rb, "T_base_target", i).reshape(4, 4),
-                                                   _num(rb, "size_mm", i))
+                                                   v["T_base_target"].reshape(4, 4), v["size_mm"])
         elif ep == R_.E_EVENTS:
             for i in range(n):
                 events.append((float(t[i]), _scalar(rb, "TextLog:level", i) or "",
