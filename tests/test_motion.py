@@ -133,10 +133,10 @@ def test_keepout_crossing_path_is_refused_and_the_arm_stays():
 def test_stops_before_joint_range_with_margin():
     params = dataclasses.replace(PARAMS, tool_speed_max_mm_s=5000.0)  # let the joints run at full speed
     m = Motion(params, LIM)
-    for j, sign, n in ((1, +1, 800), (3, -1, 800), (4, +1, 450)):  # steps: a margin over what each joint needs
+    for j, sign in ((1, +1), (3, -1), (4, +1)):
         dq_t = np.zeros(7)
         dq_t[j] = sign * LIM.dq_max[j]
-        sps = run(m, lambda q, dq, m=m, dq_t=dq_t: m.velocity_step(q, dq, dq_t), n)
+        sps = run(m, lambda q, dq, m=m, dq_t=dq_t: m.velocity_step(q, dq, dq_t), 800)
         Q = np.array([s.q for s in sps])
         half = math.radians(PARAMS.joint_margin_deg) / 2
         assert Q[:, j].max() <= LIM.q_max[j] - half + 1e-9 and Q[:, j].min() >= LIM.q_min[j] + half - 1e-9
