@@ -264,3 +264,14 @@ def test_a_jpeg_copy_of_the_photo_gives_the_same_model(kind):
     assert iou(a.mask, b.mask) > 0.82  # JPEG ringing adds a thin halo
     assert b.size_px[0] == pytest.approx(a.size_px[0], rel=0.04)
     assert b.size_px[1] == pytest.approx(a.size_px[1], rel=0.04)
+
+
+def test_shipped_photos_are_the_code_s_drawings():
+    """examples/photos/*.png are exactly what `specimen(kind, 0[, other=True])` draws."""
+    from pathlib import Path
+
+    folder = Path(__file__).resolve().parents[1] / "examples" / "photos"
+    for kind in SPECIES:
+        for other in (False, True):
+            shipped = cv2.imread(str(folder / f"{kind}{'_other' if other else ''}.png"))
+            assert shipped is not None and np.array_equal(shipped, specimen(kind, 0, other)), kind
