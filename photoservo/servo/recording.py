@@ -366,7 +366,7 @@ class Recorder:
         if not self.replayable:
             warnings.warn(f"{self.path}: {PREVIEW_WARNING}", stacklevel=3)
             self._log_static(E_WARNING, rr.TextDocument(PREVIEW_WARNING))
-            self.event(0.0, PREVIEW_WARNING, level="WARN")
+        self._preview_event_due = not self.replayable   # logged at the first frame's time
         if encode_threads > 0 and mode != "lossless":   # rr.Image copies at once: no thread
             self._queue = queue.Queue(maxsize=4 * encode_threads)
             for i in range(encode_threads):
@@ -435,6 +435,8 @@ class Recorder:
         finally:
             with self._lock:
                 try:
+                    if self._preview_event_due:
+                        self._log(E_EVENTS, self._last_t, None, rr.TextLog(PREVIEW_WARNING, level="WARN"))
                     self._flush_series()
                     if self._arm_last is not None:
                         self._draw_arm(*self._arm_last)
@@ -627,6 +629,9 @@ class Recorder:
         self._check()
         self._maybe_rotate(t)
         self._last_t = t
+        if self._preview_event_due:
+            self._preview_event_due = False
+            self.event(t, PREVIEW_WARNING, level="WARN")
         if t - self._series_flushed_t >= SERIES_FLUSH_S:
             self._flush_series(t)
         if self._arm_last is not None and t - self._arm_drawn_t >= ARM_DRAW_PERIOD_S:
@@ -740,6 +745,7 @@ class Recorder:
 
     def event(self, t: float, text: str, level: str = "INFO") -> None:
         """A line in the `events` text log (level: TRACE DEBUG INFO WARN ERROR CRITICAL)."""
+        self._check()
         self._log(E_EVENTS, t, None, rr.TextLog(text, level=level))
 
     # --- batched series ---------------------------------------------------------------------
