@@ -153,8 +153,11 @@ def test_segments_close_cleanly_and_read_as_one(tmp_path: Path):
     files = recording_files(base)
     assert files == [segment_path(base, i) for i in (1, 2, 3, 4)] == rec.files
     assert not base.exists()
+    from rerun.chunk import RrdReader
     for f in files:
         assert verify_rrd(f)[0], f
+        assert len(RrdReader(f).blueprints()) == 1     # the layout goes with every file
+        assert [e.recording_id for e in RrdReader(f).recordings()] == [rec.recording_id]
         one = read_recording(f)                        # each segment stands alone...
         assert one.setup.seed == 9 and one.setup.config_toml == CONFIG_TOML
     r = read_recording(segment_path(base, 2))          # ...and any segment names the whole
