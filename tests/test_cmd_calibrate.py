@@ -426,3 +426,21 @@ def test_water_needs_views_or_live(tmp_path, capsys):
     code, _, err = run_cli(["calibrate", "water", "--rig", str(rig_file(tmp_path, hand_eye=(X[:3, :3], X[:3, 3]))),
                             *BOARD_ARGS], capsys)
     assert_one_line_error(code, err, "give either --views DIR (saved views) or --live")
+
+
+def test_capture_into_the_same_folder_continues_the_session(board_videos, tmp_path, capsys):
+    out = tmp_path / "cap"
+    argv = ["calibrate", "capture", "--videos", str(board_videos / "l.avi"), str(board_videos / "r.avi"),
+            "--interval", "0.05", "--count", "2", "--save", str(tmp_path / "p.rrd"), "--out", str(out)]
+    assert run_cli(argv, capsys)[0] == 0
+    assert run_cli(argv, capsys)[0] == 0
+    assert sorted(p.name for p in (out / "left").iterdir()) == [f"{k:04d}.png" for k in range(4)]
+    names = [ln.split(",")[0] for ln in (out / "capture.csv").read_text().splitlines()[1:]]
+    assert names == ["0000", "0001", "0002", "0003"]
+
+
+def test_capture_unopenable_port_is_one_line(board_videos, tmp_path, capsys):
+    code, _, err = run_cli(["calibrate", "capture", "--videos", str(board_videos / "l.avi"), str(board_videos / "r.avi"),
+                            "--port", str(tmp_path / "no-such-tty"), "--interval", "1", "--save", str(tmp_path / "p.rrd"),
+                            "--out", str(tmp_path / "c")], capsys)
+    assert_one_line_error(code, err, f"--port {tmp_path / 'no-such-tty'}: cannot open")

@@ -27,6 +27,7 @@ import sys
 import threading
 import time
 import tomllib
+from collections.abc import Callable
 from pathlib import Path
 
 import cv2
@@ -34,6 +35,7 @@ import numpy as np
 
 from photoservo.errors import InputError
 from photoservo.fileio import read_image, write_image_atomic, write_text_atomic
+from photoservo.robot.link import Link, LinkError
 from photoservo.servo.cmd_config import add_config_options
 from photoservo.servo.config import load_config
 from photoservo.vision.board import (
@@ -61,12 +63,14 @@ from photoservo.vision.sources import (
     IMAGE_SUFFIXES,
     CamerasParams,
     SourceConfig,
+    StereoSource,
     make_source,
     source_config,
 )
 
 POSE_COLUMNS = ("x_mm", "y_mm", "z_mm", "rx_rad", "ry_rad", "rz_rad")
 JOINT_COLUMNS = tuple(f"q{i}_rad" for i in range(1, 8))
+LIVE_TIMEOUT_S = 30.0  # water --live gives up when the board is not seen for this long
 BOARD_HELP = "board size as COLSxROWS INNER corners (where four squares meet): 10 x 7 squares -> 9x6"
 
 
@@ -170,7 +174,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="measure now: read pairs from the cameras ([cameras] or the source flags) and the "
                         "flange pose from the arm (--port) instead of --views")
     w.add_argument("--frames", type=int, default=5, metavar="N",
-                   help="--live: pairs with the board found to use (default 5)")
+                   help="--live: pairs with the board found to use (default 5; gives up after 30 s)")
     w.add_argument("--port", help="--live: serial port of the arm's bridge")
     _source_options(w)
     add_config_options(w)
@@ -314,7 +318,6 @@ def _live_views(args: argparse.Namespace, rig: Rig, board: Board
                 ) -> list[tuple[str, np.ndarray, BoardDetection | None, BoardDetection | None]]:
     """`--frames` pairs with the board in the left image, each with the flange pose at its
     capture time from the arm's link (forward kinematics of the interpolated joint state)."""
-    from photoservo.robot.link import Link
     from photoservo.robot.pa10 import fk
 
     if not args.port:
@@ -323,9 +326,20 @@ def _live_views(args: argparse.Namespace, rig: Rig, board: Board
         raise InputError(f"--frames must be >= 1, got {args.frames}")
     config = load_config(args.config, args.overrides)
     source = make_source(_cameras(args, config.cameras))
+    try:
+        return _read_live(args, rig, board, Link(args.port, config.link), source, fk)
+    except LinkError as e:
+        raise InputError(f"--port {args.port}: {e}") from None
+
+
+def _read_live(args: argparse.Namespace, rig: Rig, board: Board, link: Link, source: StereoSource,
+               fk: Callable[[np.ndarray], np.ndarray]) -> list:
     out: list = []
-    with Link(args.port, config.link) as link, source:
+    with link, source:
+        deadline = time.monotonic() + LIVE_TIMEOUT_S
         for frame in source:
+            if time.monotonic() > deadline:
+                break
             if (frame.left.shape[1], frame.left.shape[0]) != tuple(rig.left.size):
                 raise InputError(f"camera image is {frame.left.shape[1]}x{frame.left.shape[0]}, the rig's left "
                                  f"camera is {rig.left.size[0]}x{rig.left.size[1]}")
@@ -341,6 +355,8 @@ def _live_views(args: argparse.Namespace, rig: Rig, board: Board
             if len(out) >= args.frames:
                 break
         print(f"  {source.stats.summary()}")
+    if not out:
+        raise InputError(f"--live: the board was not found in the left camera within {LIVE_TIMEOUT_S:.0f} s")
     return out
 
 
@@ -545,12 +561,15 @@ class _EnterKey:
         threading.Thread(target=self._run, daemon=True, name="enter-key").start()
 
     def _run(self) -> None:
-        for line in sys.stdin:
-            with self._lock:
-                if line.strip().lower() == "q":
-                    self.quit = True
-                    return
-                self.presses += 1
+        try:
+            for line in sys.stdin:
+                with self._lock:
+                    if line.strip().lower() == "q":
+                        self.quit = True
+                        return
+                    self.presses += 1
+        except (OSError, ValueError):  # no usable terminal: behave as end of input
+            pass
         self.quit = True
 
     def take(self) -> bool:
@@ -574,11 +593,11 @@ def run_capture(args: argparse.Namespace) -> int:
     source = make_source(_cameras(args, config.cameras))
     link = None
     if args.port:
-        from photoservo.robot.link import Link
         from photoservo.robot.pa10 import fk
 
         link = Link(args.port, config.link)
-    rows, poses = [], []
+    rows, poses = _existing_rows(out / "capture.csv"), _existing_rows(out / "poses.csv")
+    first = 1 + max((int(r[0]) for r in rows if r[0].isdigit()), default=-1)  # continue a session
     saved = 0
     enter = None if args.interval > 0 else _EnterKey()
     if enter is not None:
@@ -586,7 +605,10 @@ def run_capture(args: argparse.Namespace) -> int:
     rec = Recorder.open(args.save, "calibrate", mode="lossless", view=args.spawn, connect_url=args.connect)
     try:
         if link is not None:
-            link.open()
+            try:
+                link.open()
+            except LinkError as e:
+                raise InputError(f"--port {args.port}: {e}") from None
         with source:
             for w in source.warnings:
                 print(f"photoservo calibrate: warning: {w}", file=sys.stderr)
@@ -611,11 +633,13 @@ def run_capture(args: argparse.Namespace) -> int:
                 if args.require_board and (dl is None or dr is None):
                     print(f"  pair {frame.index}: board not in both images, not saved")
                     continue
-                name = f"{saved:04d}"
+                name = f"{first + saved:04d}"
                 row = [name, f"{frame.t_left:.6f}", f"{frame.t_right:.6f}"]
                 if link is not None:
                     try:
                         q = link.state_at(frame.t).q
+                    except LinkError as e:
+                        raise InputError(f"--port {args.port}: {e}") from None
                     except LookupError as e:
                         print(f"  pair {frame.index}: no flange pose at its capture time ({e}), not saved")
                         continue
@@ -642,6 +666,13 @@ def run_capture(args: argparse.Namespace) -> int:
             write_text_atomic(out / "poses.csv", header + "\n" + "".join(",".join(r) + "\n" for r in poses))
     print(f"saved {saved} pairs to {out} ({stats}); preview recording {rec.path}")
     return 0
+
+
+def _existing_rows(path: Path) -> list[list[str]]:
+    """Data rows of a CSV that an earlier capture into the same folder wrote (kept, appended to)."""
+    if not path.is_file():
+        return []
+    return [r for r in csv.reader(path.read_text().splitlines()[1:]) if r]
 
 
 __all__ = ["add_arguments", "pose_row", "read_flange_poses", "run", "set_toml_key"]
