@@ -8,8 +8,8 @@
         link.stop(); link.disable()
 
 A background reader thread decodes every byte the bridge sends and keeps the recent states;
-setpoints are written with a non-blocking write (a setpoint that finds the line still busy is
-dropped and counted — the next one supersedes it). Control messages (enable, stop, tool...) wait
+setpoints are written with a non-blocking write (a setpoint that finds the line still busy — by
+the baud rate, see `Link` — is dropped and counted: the next one supersedes it). Control messages (enable, stop, tool...) wait
 for their ACK. A bridge that goes silent (no state for `silence_timeout_s`) or away (the port
 errors or closes) makes the next call raise `LinkError` saying what to check. Leaving the `with`
 block stops the arm (controlled stop) and disables the servo if it was on; there is no __del__.
@@ -100,11 +100,19 @@ def _describe_nack(n: P.Nack, names: tuple[str, ...] | None = None) -> str:
 class Link:
     """Serial client of the bridge. See the module docstring for the life cycle.
 
+    Setpoints are paced by the line's baud rate (`params.baud`): a setpoint is dropped (and
+    counted) while more than MAX_BACKLOG_FRAMES setpoints' worth of bytes are still due on the
+    line, because the OS would queue it behind them — a pty or a USB adapter buffers kilobytes,
+    i.e. hundreds of milliseconds of stale setpoints at 115200 baud. Control messages are
+    always sent.
+
     Args:
         port: device path (/dev/ttyUSB0, /dev/pts/N) or pyserial URL (socket://, rfc2217://...).
         params: LinkParams (baud for real ports; timeouts; how much state history to keep).
         joint_names: for error messages (default J1..J7).
     """
+
+    MAX_BACKLOG_FRAMES = 1.5
 
     def __init__(self, port: str, params: LinkParams, joint_names: tuple[str, ...] | None = None) -> None:
         self.port = port
@@ -129,6 +137,11 @@ class Link:
         self._t_open = 0.0
         self._servo_requested = False
         self._errors_at_sync = 0
+        # bytes written but (by the baud rate) not yet on the line: the OS buffers of a pty or a
+        # USB adapter hide this, and a queue of stale setpoints is latency
+        self._backlog = 0.0
+        self._t_backlog = time.monotonic()
+        self._setpoint_len = len(P.encode(P.JointSetpoint(0, (0.0,) * P.N_JOINTS, (0.0,) * P.N_JOINTS), 0))
 
     # ------------------------------------------------------------------ life cycle
     def open(self) -> P.VersionInfo:
@@ -360,16 +373,22 @@ class Link:
         if ser is None:
             raise LinkError(f"link to {self.port} is closed")
         with self._tx_lock:
+            now = time.monotonic()
+            self._backlog = max(0.0, self._backlog - (now - self._t_backlog) * self.params.baud / 10.0)
+            self._t_backlog = now
             try:
                 if self._tx_pending:
                     n = ser.write(self._tx_pending) or 0
                     self._tx_pending = self._tx_pending[n:]
                     if self._tx_pending and droppable:
                         return None
+                if droppable and self._backlog > self.MAX_BACKLOG_FRAMES * self._setpoint_len:
+                    return None  # the line is still busy with earlier setpoints: this one is late
                 seq = self._next_seq()
                 data = self._tx_pending + P.encode(msg, seq)
                 n = ser.write(data) or 0
                 self._tx_pending = data[n:]
+                self._backlog += len(data)
                 return seq
             except (serial.SerialException, OSError) as e:
                 self._fail(f"writing to {self.port} failed ({e})")

@@ -14,10 +14,12 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import os
 import signal
 import sys
 import threading
 
+from photoservo.errors import InputError
 from photoservo.robot.emulator import Emulator
 from photoservo.servo.cmd_config import add_config_options
 from photoservo.servo.config import load_config
@@ -37,6 +39,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--delay-ms", type=float, metavar="MS", help="length of one injected stall (ms, default 20)")
     p.add_argument("--brake-after", type=float, metavar="S", help="setpoint silence before the brakes engage (s)")
     p.add_argument("--seed", type=int, help="seed of the fault injection")
+    p.add_argument("--rt-priority", type=int, metavar="N",
+                   help="run with SCHED_FIFO real-time priority N (1..99; Linux, needs permission), as a "
+                        "stand-in for the bridge's dedicated hardware")
     add_config_options(p)
 
 
@@ -47,6 +52,13 @@ def run(args: argparse.Namespace) -> int:
         changes["state_hz"] = min(cfg.emulator.state_hz, args.rate)
     params = dataclasses.replace(cfg.emulator, **changes)
     params.validate("emulator")  # the flags go through the config's checks (InputError, exit 2)
+    if args.rt_priority is not None:
+        if not 1 <= args.rt_priority <= 99:
+            raise InputError(f"--rt-priority {args.rt_priority}: must be within 1..99")
+        try:  # before the emulator thread starts, so that it inherits the policy
+            os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(args.rt_priority))
+        except (OSError, AttributeError) as e:
+            raise InputError(f"--rt-priority {args.rt_priority}: not permitted here ({e})") from None
     emu = Emulator(params, link=args.link)
     done = threading.Event()
 
