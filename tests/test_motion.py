@@ -131,7 +131,8 @@ def test_keepout_crossing_path_is_refused_and_the_arm_stays():
 
 
 def test_stops_before_joint_range_with_margin():
-    params = dataclasses.replace(PARAMS, tool_speed_max_mm_s=5000.0)  # let the joints run at full speed
+    # let the joints run at full speed, and S2 lean the arm down to its range end (flange at z = -158 mm)
+    params = dataclasses.replace(PARAMS, tool_speed_max_mm_s=5000.0, z_min_mm=-300.0)
     m = Motion(params, LIM)
     for j, sign in ((1, +1), (3, -1), (4, +1)):
         dq_t = np.zeros(7)
