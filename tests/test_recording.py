@@ -16,6 +16,7 @@ import numpy as np
 import pytest
 
 from photoservo.errors import InputError
+from photoservo.robot.pa10 import make_pose
 from photoservo.servo.recording import (
     PREVIEW_WARNING,
     Recorder,
@@ -248,12 +249,6 @@ def test_hard_kill_leaves_verified_segments_read_as_one(tmp_path: Path):
     assert r.setup.seed == {"ga": 3, "world": 4}
 
 
-def _pose(R: np.ndarray, p) -> np.ndarray:
-    T = np.eye(4)
-    T[:3, :3], T[:3, 3] = R, p
-    return T
-
-
 def _Rx(deg: float) -> np.ndarray:
     c, s = math.cos(math.radians(deg)), math.sin(math.radians(deg))
     return np.array([[1, 0, 0], [0, c, -s], [0, s, c]])
@@ -268,12 +263,12 @@ def test_comparison_table_against_hand_computed_numbers(tmp_path: Path):
     # Camera 1000 mm above the base origin looking straight down: x_base = x_cam,
     # y_base = -y_cam, z_base = 1000 - z_cam.
     down = np.diag([1.0, -1.0, -1.0])
-    T_base_left = _pose(down, [0, 0, 1000.0])
+    T_base_left = make_pose(down, [0, 0, 1000.0])
     a = tmp_path / "a.rrd"
     with Recorder.open(a, "track") as rec:
         cam_x = [0.0, 10.0, 30.0]
-        truths = [_pose(down, [0, 0, 500]), _pose(_Rx(5) @ down, [10, 3, 504]),
-                  _pose(_Rz(10) @ down, [30, 0, 500])]
+        truths = [make_pose(down, [0, 0, 500]), make_pose(_Rx(5) @ down, [10, 3, 504]),
+                  make_pose(_Rz(10) @ down, [30, 0, 500])]
         sizes = [(20, 10), (22, 10), (20, 13)]
         for k, fit in enumerate([0.8, 0.6, 0.7, 0.1]):
             t = 0.04 * k

@@ -111,6 +111,7 @@ import cv2
 import numpy as np
 
 from photoservo.errors import InputError
+from photoservo.robot.pa10 import fk_frames, make_pose
 
 
 class _LazyModule:
@@ -294,13 +295,6 @@ def pack_arrays(obj: Any) -> bytes:
 
 def _bytes_value(data: bytes) -> pa.Array:
     return pa.array([data], type=pa.binary())
-
-
-def _T(R: np.ndarray, p: np.ndarray) -> np.ndarray:
-    T = np.eye(4)
-    T[:3, :3] = R
-    T[:3, 3] = p
-    return T
 
 
 def _transform(T: np.ndarray) -> rr.Transform3D:
@@ -668,7 +662,7 @@ class Recorder:
         if posed:
             if alpha is not None:
                 self._queue_scalar("plots/alpha", t, frame, float(alpha))
-            T_left_model = _T(np.asarray(R, dtype=np.float64), np.asarray(position_mm, dtype=np.float64))
+            T_left_model = make_pose(np.asarray(R, dtype=np.float64), np.asarray(position_mm, dtype=np.float64))
             T_base_model = T_left_model if T_base_left is None else np.asarray(T_base_left) @ T_left_model
             self._log_box("world/target/estimate", t, frame, T_base_model, size_mm, [255, 140, 0])
         else:
@@ -781,7 +775,6 @@ class Recorder:
 
     def _draw_arm(self, t: float, q: np.ndarray) -> None:
         """The arm's link frames and skeleton at joint angles q, and the flange path."""
-        from photoservo.robot.pa10 import fk_frames
         frames = fk_frames(q)
         self._arm_drawn_t = t
         with self._lock:

@@ -37,6 +37,7 @@ import pyarrow.compute as pc
 from rerun.chunk import RrdReader
 
 from photoservo.errors import InputError
+from photoservo.robot.pa10 import make_pose
 from photoservo.servo import recording as R_
 
 _SEG = re.compile(r"^(?P<stem>.*)\.seg(?P<n>\d{4,})(?P<partial>\.partial)?$")
@@ -119,8 +120,7 @@ class EstimateRecord:
         """The estimate in the base frame (or the camera frame when no camera pose was logged)."""
         if self.rotation is None or self.position_mm is None:
             return None
-        T = np.eye(4)
-        T[:3, :3], T[:3, 3] = self.rotation, self.position_mm
+        T = make_pose(self.rotation, self.position_mm)
         return T if self.T_base_left is None else self.T_base_left @ T
 
 
