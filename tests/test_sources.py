@@ -247,3 +247,42 @@ def test_refused_device_settings_are_reported_not_fatal(tmp_path):
         assert len(list(src)) == 2
     assert any("left: the device refused exposure=100.0" in w for w in src.warnings)
     assert any("right: the device refused wb_temperature=4500.0" in w for w in src.warnings)
+
+
+def test_latest_frame_reader_hands_out_the_newest_pair(tmp_path):
+    """Cameras at 20 fps (videos paced in real time), a consumer that takes a frame every
+    120 ms: it gets fresh frames, and the ones it missed are counted as overwritten."""
+    from photoservo.vision.sources import LatestFrameReader
+
+    left = write_video(tmp_path / "l.avi", 12, 20.0, 0)
+    right = write_video(tmp_path / "r.avi", 12, 20.0, 1)
+    got = []
+    with LatestFrameReader(make_source(VideoPairConfig(left, right, realtime=True))) as reader:
+        while True:
+            try:
+                frame = reader.latest(timeout_s=1.0)
+            except EndOfStream:
+                break
+            assert frame is not None
+            got.append(frame.index)
+            assert time.monotonic() - frame.t < 0.25  # fresh (a frame period is 50 ms; slack for a loaded machine)
+            time.sleep(0.12)
+    assert got == sorted(set(got)) and got[-1] == 11
+    assert len(got) < 12 and reader.overwritten == 12 - len(got)
+
+
+def test_latest_frame_reader_needs_start_and_reports_errors(tmp_path):
+    from photoservo.vision.sources import LatestFrameReader
+
+    (tmp_path / "L").mkdir()
+    (tmp_path / "R").mkdir()
+    cv2.imwrite(str(tmp_path / "L" / "0.png"), frame_image(0, 0))
+    cv2.imwrite(str(tmp_path / "R" / "0.png"), frame_image(0, 1))
+    reader = LatestFrameReader(make_source(ImageFolderConfig(str(tmp_path / "L"), str(tmp_path / "R"))))
+    with pytest.raises(SourceNotConnectedError, match="call start"):
+        reader.latest()
+    with reader:
+        assert reader.latest(timeout_s=2.0).index == 0
+        with pytest.raises(EndOfStream):
+            reader.latest(timeout_s=2.0)
+    assert not reader.source.is_connected
