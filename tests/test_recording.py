@@ -289,7 +289,7 @@ def test_comparison_table_against_hand_computed_numbers(tmp_path: Path):
             rec.log_frame(k, 0.05 * k, *frame_pair(k))
             rec.log_estimate(k, 0.05 * k, found=True, fitness=0.9, R=np.eye(3),
                              position_mm=[0, 0, 400.0 + 7 * k * k], alpha=2.0)
-    ra, rb = read_recording(a), read_recording(b)
+    ra = read_recording(a)
     m = run_metrics(ra)
     expect = {"frames": 4, "mean_fitness": 0.55, "found_ratio": 0.75, "lost_frames": 1,
               "jitter_mm": 10.0,                      # |30 - 2*10 + 0|
@@ -300,7 +300,7 @@ def test_comparison_table_against_hand_computed_numbers(tmp_path: Path):
               "size_err_mm": math.sqrt((0 + 1 + 1.5 ** 2) / 3)}
     for k, v in expect.items():
         assert m[k] == pytest.approx(v, rel=1e-6, abs=1e-6), k
-    table = compare_runs(ra, rb, "recorded", "replay")
+    table = compare_runs(ra, b, "recorded", "replay")                  # a run or a path
     assert table.row("mean_fitness").b == pytest.approx(0.9)
     assert table.row("jitter_mm").b == pytest.approx(14.0)   # z: 400, 407, 428 -> 14
     assert table.row("ms_per_frame").delta == pytest.approx(10.0)

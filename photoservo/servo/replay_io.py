@@ -560,8 +560,10 @@ class Comparison:
         return "\n".join([line(head), "  ".join("-" * n for n in w), *map(line, body)])
 
 
-def compare_runs(a: Recording, b: Recording, name_a: str = "A", name_b: str = "B") -> Comparison:
-    """The comparison table of two runs (replay vs recorded, or two closed-loop runs).
-    Truth rows are NaN ('-') unless the runs carry ground truth."""
+def compare_runs(a: Recording | str | Path, b: Recording | str | Path, name_a: str = "A",
+                 name_b: str = "B") -> Comparison:
+    """The comparison table of two runs (replay vs recorded, or two closed-loop runs), given
+    as recordings read or as paths. Truth rows are NaN ('-') unless the runs carry truth."""
+    a, b = (r if isinstance(r, Recording) else read_recording(r) for r in (a, b))
     ma, mb = run_metrics(a), run_metrics(b)
     return Comparison(name_a, name_b, [ComparisonRow(k, lbl, ma[k], mb[k]) for k, lbl, _ in METRICS])
