@@ -17,7 +17,7 @@ like a real camera), it records N stereo frames through `Recorder` and reports:
   read fps         `replay_io.iter_frames` read-back speed (stereo frames/s, decoded)
   exact            frames read back bit-equal to those logged
 and the per-frame cost of the other logs of a tracking frame (estimate with projected points,
-timings, 17 arm samples of a 500 Hz control loop).
+timings, 17 arm samples of a 500 Hz control loop), and the stall at a segment change.
 
 Prints a table and writes benchmarks/out/recording.json (median of `--repeats` runs).
 Run: /work/venv/bin/python benchmarks/recording.py [--frames 150] [--repeats 3]
@@ -132,6 +132,21 @@ def other_costs(folder: Path, n: int = 300) -> dict:
             "points_per_camera": len(model.inner_uv) + len(model.outer_uv)}
 
 
+def rotation_stall(frames: list, folder: Path, n: int = 120) -> dict:
+    """log_frame time at a segment change (flush, footer, rename, new file) vs the median,
+    with 1 s segments of lossless frames."""
+    times = []
+    with Recorder.open(folder / "rot.rrd", "bench", segment_s=1.0) as rec:
+        for k in range(n):
+            t0 = time.perf_counter()
+            rec.log_frame(k, k / FPS, *frames[k % len(frames)])
+            times.append(time.perf_counter() - t0)
+            time.sleep(max(0.0, 1 / FPS - (time.perf_counter() - t0)))
+    at = [times[k] for k in range(1, n) if k % int(FPS) == 0]
+    return {"rotation_ms": 1e3 * statistics.median(at), "rotation_max_ms": 1e3 * max(at),
+            "other_frames_ms": 1e3 * statistics.median(times)}
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--frames", type=int, default=150)
@@ -148,6 +163,7 @@ def main() -> int:
                        "exact": all(r["exact"] for r in runs)}
                 results.append(row)
         costs = other_costs(Path(tmp))
+        costs.update(rotation_stall(frames, Path(tmp)))
     head = f"{'frames':20s} {'mode':9s} {'loop ms':>8s} {'total ms':>9s} {'cpu ms':>7s} {'enc ms':>7s} {'MB/min':>8s} {'read fps':>9s} exact"
     print(f"Recording 640x480 stereo @ {FPS:.0f} fps, {args.frames} frames x {args.repeats} runs (median); "
           f"{os.cpu_count()} CPUs, machine shared with other engineers (loaded)")
@@ -159,6 +175,9 @@ def main() -> int:
           f"({costs['points_per_camera']} model points per camera), 17 x log_arm "
           f"{costs['log_arm_us']:.1f} us each + their flush with the frame metadata "
           f"{costs['arm_flush_and_frame_meta_ms']:.2f} ms")
+    print(f"segment change (lossless, noisy frames, paced at {FPS:.0f} fps): log_frame takes "
+          f"{costs['rotation_ms']:.1f} ms (max {costs['rotation_max_ms']:.1f}) vs "
+          f"{costs['other_frames_ms']:.1f} ms otherwise")
     out = Path(__file__).parent / "out" / "recording.json"
     write_text_atomic(out, json.dumps({"fps": FPS, "size": [640, 480], "frames": args.frames,
                                        "repeats": args.repeats, "load_note": "shared 2-core machine, loaded",
