@@ -281,6 +281,7 @@ class Motion:
         inp.target_acceleration = np.zeros(N_JOINTS)
         reasons = [note] if note else []
         v_cap_lo, v_cap_hi = self._range_caps(q_meas)
+        _, P, J = self._point_jacobians(q_meas)
         sp = None
         for _ in range(3):
             s = self._time_scale
@@ -293,7 +294,7 @@ class Motion:
             if result not in (Result.Working, Result.Finished):
                 return self.stop_step(q_meas, dq_meas, reason=f"Ruckig refused the move ({result})")
             sp = self._from_out()
-            speed = self._tool_speed(sp.q, sp.dq)
+            speed = float(np.linalg.norm(J[-1] @ sp.dq))  # tool point (Jacobian one period old)
             if speed <= 1.02 * self.params.tool_speed_max_mm_s:
                 break
             self._time_scale *= self.params.tool_speed_max_mm_s / speed
@@ -303,7 +304,7 @@ class Motion:
                   | ((v_cap_lo < v) & (-sp.dq >= 0.98 * v_cap_lo) & (sp.dq < 0)))
         if slowed.any():
             reasons.append("joint range: slowing " + ", ".join(np.array(JOINT_NAMES)[slowed]))
-        checked = self._accept(q_meas, dq_meas, sp, reasons)
+        checked = self._accept(q_meas, dq_meas, sp, reasons, P)
         err = np.abs(q_arm - q_target)
         self.done = bool(result == Result.Finished and np.all(err <= math.radians(self.params.position_tolerance_deg))
                          and not checked.reason.startswith("braking"))
@@ -353,7 +354,7 @@ class Motion:
         if result not in (Result.Working, Result.Finished):
             sp = self.stop_step(q_meas, dq_meas, reason=f"Ruckig refused the velocity target ({result})")
         else:
-            sp = self._accept(q_meas, dq_meas, self._from_out(), reasons)
+            sp = self._accept(q_meas, dq_meas, self._from_out(), reasons, P)
         self.done = False
         return sp
 
@@ -528,7 +529,8 @@ class Motion:
     def _tool_speed(self, q: np.ndarray, dq: np.ndarray) -> float:
         return float(np.linalg.norm(jacobian(q, self.T_flange_tool)[:3] @ dq))
 
-    def _accept(self, q_meas: np.ndarray, dq_meas: np.ndarray, sp: Setpoint, reasons: list[str]) -> Setpoint:
+    def _accept(self, q_meas: np.ndarray, dq_meas: np.ndarray, sp: Setpoint, reasons: list[str],
+                P_start: np.ndarray) -> Setpoint:
         """Braking check (safety layer 4): keep `sp` only if a controlled stop from it stays in
         the ranges (less half the margin) and the keep-out; else stop from the measured state."""
         inp = self._brake_inp
@@ -549,22 +551,24 @@ class Motion:
         if bad.any():
             names = ", ".join(np.array(JOINT_NAMES)[bad])
             return self.stop_step(q_meas, dq_meas, reason=f"braking check: joint range ({names})")
-        why = self._keepout_on_brake(sp.q, Q, np.maximum(np.abs(hi - sp.q), np.abs(lo - sp.q)))
+        travel = np.maximum(np.abs(hi - q_meas), np.abs(lo - q_meas))  # from the step's start
+        why = self._keepout_on_brake(P_start, Q, travel)
         if why:
             return self.stop_step(q_meas, dq_meas, reason=f"braking check: {why}")
         out = Setpoint(sp.q, sp.dq, sp.ddq, "; ".join(dict.fromkeys(reasons)))
         self._emit(out)
         return out
 
-    def _keepout_on_brake(self, q: np.ndarray, Q: np.ndarray, dq_travel: np.ndarray) -> str:
-        """Keep-out along the braking trajectory in self._traj. Sampled only when a point is
-        closer to a keep-out boundary than the most the stop could move it: joint j turning by
-        |dq_j| moves a point by at most |dq_j| times the length of the chain beyond joint j."""
+    def _keepout_on_brake(self, P_start: np.ndarray, Q: np.ndarray, dq_travel: np.ndarray) -> str:
+        """Keep-out along the braking trajectory Q (N, 7). The samples are checked only when a
+        point (at P_start (K, 3), the step's start) is closer to a keep-out boundary than the
+        most the step and the stop could move it: joint j turning by |dq_j| moves a point by at
+        most |dq_j| times the length of the chain beyond joint j."""
         bound = float(dq_travel @ self._chain_mm) + 1e-6
         p = self.params
         lo = np.array([p.workspace_min_mm[0], p.workspace_min_mm[1], max(p.z_min_mm, p.workspace_min_mm[2])])
         hi = np.asarray(p.workspace_max_mm)
-        clearance = min(float(np.min(np.minimum(x - lo, hi - x))) for x in self.keepout_points(q).values())
+        clearance = float(np.min(np.minimum(P_start - lo, hi - P_start)))
         if clearance > bound:
             return ""
         return self.keepout_violation(Q)
