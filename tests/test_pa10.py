@@ -6,6 +6,8 @@ import math
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from photoservo.errors import InputError
 from photoservo.robot import pa10
@@ -243,3 +245,32 @@ def test_bad_limits_file_names_the_key(tmp_path):
 
 def test_docstring_examples_run():
     assert doctest.testmod(pa10).failed == 0
+
+
+@settings(max_examples=200, deadline=None)
+@given(q=st.lists(st.floats(-4.4, 4.4), min_size=7, max_size=7),
+       ref=st.lists(st.floats(-4.4, 4.4), min_size=7, max_size=7))
+def test_nearest_equivalent_properties(q, ref):
+    q, ref = np.array(q), np.array(ref)
+    out = nearest_equivalent(q, ref, LIM)
+    k = (out - q) / (2 * np.pi)
+    np.testing.assert_allclose(k, np.round(k), atol=1e-9)  # same angle
+    inside = (q >= LIM.q_min) & (q <= LIM.q_max)
+    assert np.all((out >= LIM.q_min - 1e-12) & (out <= LIM.q_max + 1e-12) | ~inside)
+    for dk in (-1, 1):  # no other in-range equivalent is nearer the reference
+        alt = out + 2 * np.pi * dk
+        ok = (alt >= LIM.q_min) & (alt <= LIM.q_max) & inside
+        assert np.all(np.abs(alt - ref)[ok] >= np.abs(out - ref)[ok] - 1e-9)
+
+
+def test_pose_error_is_the_twist_that_reaches_the_target():
+    rng = np.random.default_rng(8)
+    for _ in range(20):
+        T = fk(rng.uniform(LIM.q_min, LIM.q_max))
+        T_star = fk(rng.uniform(LIM.q_min, LIM.q_max))
+        e = pose_error(T_star, T)
+        w = e[3:]
+        angle = np.linalg.norm(w)
+        R = _exp_twist(w / angle, np.zeros(3), angle)[:3, :3] @ T[:3, :3]  # rotate by w in the BASE frame
+        np.testing.assert_allclose(R, T_star[:3, :3], atol=1e-9)
+        np.testing.assert_allclose(T[:3, 3] + e[:3], T_star[:3, 3], atol=1e-9)
