@@ -26,10 +26,13 @@ Acquisition (`estimate`): the target's hues (the model's `target_hues`) are segm
 images; blobs are paired along the epipolar lines and triangulated, which gives (u, v, q), the
 apparent scale s from the blob area and two heading hypotheses from the blob's principal axis.
 Each pair seeds one GA island searching a window around it; an optional unseeded island
-searches the whole volume. Every island stops when converged (`Convergence`). The best island
-gives the estimate, the others are the candidate list. `found` is fitness >= the detection
-threshold (calibrated on empty and look-alike scenes, see benchmarks/accuracy.py), and
-confidence = 1 / (1 + exp(-(fitness - threshold) / confidence_scale)).
+searches the whole volume. Every island stops when converged (`Convergence`), then tries the
+pose's look-alike twins (planar-ambiguity mirror, heading + 180 deg). Each island's best is a
+candidate, scored for detection by `detection_score` (the fitness with the cameras combined by
+their minimum: both must see it); the highest is the estimate, the others the candidate list.
+`found` is detection_score >= the detection threshold (calibrated on empty and look-alike
+scenes, see benchmarks/accuracy.py), and
+confidence = 1 / (1 + exp(-(detection_score - threshold) / confidence_scale)).
 
 Tracking (`PoseSearch`): one persistent GA; `set_frame` for a new frame, `set_window` around a
 predicted pose, `reset_full` to re-acquire, `seed` to inject poses, `step(n)`.
@@ -37,6 +40,7 @@ predicted pose, `reset_full` to re-acquire, `seed` to inject poses, `step(n)`.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 from dataclasses import dataclass, field
@@ -86,7 +90,7 @@ class EstimatorParams:
     position_tol_mm: float  # ... best position moved less than this (mm)
     rotation_tol_deg: float  # ... best rotation turned less than this (deg)
     alpha_tol: float  # ... best alpha changed by less than this fraction
-    threshold: float  # detection threshold on the best fitness (found = fitness >= threshold)
+    threshold: float  # detection threshold (found = detection_score >= threshold)
     confidence_scale: float  # width of the logistic confidence around the threshold
 
     def validate(self, where: str) -> None:
@@ -290,6 +294,7 @@ class Estimate:
     confidence: float
     evaluations: int = 0
     candidates: tuple[dict, ...] = field(default_factory=tuple)
+    detection_score: float | None = None
 
     def to_json(self, with_candidates: bool = False) -> dict:
         """Exactly the DESIGN.md estimate object (plus `confidence`, `evaluations` and, when asked,
@@ -306,6 +311,7 @@ class Estimate:
             "generations": int(self.generations),
             "seconds": round(float(self.seconds), 4),
             "confidence": round(float(self.confidence), 4),
+            "detection_score": None if self.detection_score is None else round(float(self.detection_score), 6),
             "evaluations": int(self.evaluations),
         }
         if with_candidates:
@@ -326,6 +332,7 @@ class PoseSearch:
         self.fit_params, self.est_params = fit_params, est_params
         self.space = GeneSpace(est_params.genes, rig, model, est_params)
         self.ga = GA(self._fitness, region or self.space.full_region(), ga_params, rng)
+        self._best_cache: tuple[np.ndarray, np.ndarray, np.ndarray, float] | None = None
 
     def _fitness(self, g: np.ndarray) -> np.ndarray:
         R, t, alpha, valid = self.space.decode(g)
@@ -359,32 +366,59 @@ class PoseSearch:
         return self.best()
 
     def best(self, source: str = "") -> Candidate:
+        """The best individual decoded (the decoding is cached while the best genes stay put)."""
         g, f = self.ga.best()
-        R, t, alpha, _ = self.space.decode(g)
-        return Candidate(R=R[0], position_mm=t[0], alpha=float(alpha[0]), fitness=f,
-                         generations=self.ga.generation, source=source)
+        if self._best_cache is None or not np.array_equal(self._best_cache[0], g):
+            R, t, alpha, _ = self.space.decode(g)
+            self._best_cache = (g, R[0], t[0], float(alpha[0]))
+        _, R, t, alpha = self._best_cache
+        return Candidate(R=R, position_mm=t, alpha=alpha, fitness=f, generations=self.ga.generation, source=source)
 
-    def run(self, flip_check: bool = True) -> Candidate:
-        """Evolve until converged (`Convergence`) or max_generations. With `flip_check`, once
-        converged the planar pose ambiguity is tested: the best pose's mirror (normal reflected
-        about the line of sight, `reflected_rotation`) is injected and the GA runs on until it
-        converges again; the better of the two basins wins."""
+    def run(self, ambiguity_check: bool = True) -> Candidate:
+        """Evolve until converged (`Convergence`) or max_generations; the best pose.
+
+        With `ambiguity_check`, the converged pose's look-alike twins are then tried, each by a
+        short GA of its own in a narrow window around it (`alternatives`): the mirror of the
+        planar pose ambiguity (normal reflected about the line of sight), the heading turned by
+        180 degrees, and both. A twin that scores higher replaces the pose."""
         p = self.est_params
         conv = Convergence(p)
-        flipped = not flip_check
         for _ in range(p.max_generations):
             c = self.step(1)
             if conv.update(c.fitness, c.R, c.position_mm, c.alpha):
-                if flipped:
-                    break
-                flipped = True
-                conv = Convergence(p)
-                n = max(2, self.ga.params.population // 3)
-                R2 = reflected_rotation(c.R, c.position_mm)
-                g = np.repeat(self.space.encode(R2, c.position_mm, c.alpha), n, axis=0)
-                g[1:, 3:6] += self.ga.rng.normal(0.0, 0.03, (n - 1, 3))
-                self.ga.inject(g)
-        return self.best()
+                break
+        best = self.best()
+        return self.resolve_twins(best) if ambiguity_check else best
+
+    def resolve_twins(self, best: Candidate) -> Candidate:
+        """Try the look-alike twins of a converged pose (`alternatives`), each by a short GA in a
+        narrow window around it; the best of the pose and its twins."""
+        p = self.est_params
+        if not np.isfinite(best.fitness):
+            return best
+        short = dataclasses.replace(p, min_generations=max(1, p.patience // 2), patience=max(2, p.patience // 2),
+                                    max_generations=max(p.patience, p.max_generations // 4))
+        for R_alt in alternatives(best.R, best.position_mm):
+            sub = PoseSearch(self.model, self.rig, self.frame, self.ga.params, short, self.fit_params, self.ga.rng)
+            z = float(best.position_mm[2])
+            sub.ga.reset(sub.space.window(R_alt, best.position_mm, best.alpha, position_mm=0.03 * z,
+                                          heading_deg=15.0, tilt_deg=15.0, alpha_frac=0.08))
+            sub.seed(R_alt, best.position_mm, best.alpha)
+            c = sub.run(ambiguity_check=False)
+            self.ga.evaluations += sub.ga.evaluations
+            self.ga.generation += c.generations
+            if c.fitness > best.fitness:
+                best = c
+                self.ga.inject(self.space.encode(c.R, c.position_mm, c.alpha))
+        return Candidate(best.R, best.position_mm, best.alpha, best.fitness, self.ga.generation, best.source)
+
+
+def alternatives(R: np.ndarray, t: np.ndarray) -> list[np.ndarray]:
+    """Orientations a flat target's pose is easily confused with (see `PoseSearch.run`): the
+    planar-ambiguity mirror, the heading turned by 180 degrees about the model normal, and both."""
+    half_turn = np.diag([-1.0, -1.0, 1.0])  # Rz(pi): heading + 180 deg
+    R_m = reflected_rotation(R, t)
+    return [R_m, R @ half_turn, R_m @ half_turn]
 
 
 def reflected_rotation(R: np.ndarray, t: np.ndarray) -> np.ndarray:
@@ -427,15 +461,19 @@ def _moments_shape(m: dict) -> tuple[np.ndarray, float, float, float]:
     return c, a, angle, math.sqrt(l1 / max(l2, 1e-9))
 
 
-def target_blobs(hue: np.ndarray, target_hues: np.ndarray, min_px: int, max_blobs: int = 12) -> list[Blob]:
-    """Blobs of the model's target hues in a hue image (largest first)."""
+def target_blobs(hue: np.ndarray, target_hues: np.ndarray, min_px: int, max_blobs: int = 12,
+                 merge_px: int = 9) -> list[Blob]:
+    """Blobs of the model's target hues in a hue image (largest first). Pieces closer than about
+    `merge_px` (a creature cut up by foam, glints or its own markings) count as one blob; its
+    area and moments are those of the target-hue pixels only."""
     lut = np.zeros(256, np.uint8)
     lut[:HUE_BINS] = np.asarray(target_hues, bool) * 255
-    mask = lut[hue]
-    k = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (5, 5))
-    mask = cv2.morphologyEx(mask, cv2.MORPH_CLOSE, k)
-    _n, labels, stats, _ = cv2.connectedComponentsWithStats(mask, connectivity=8)
-    order = [i for i in np.argsort(-stats[:, cv2.CC_STAT_AREA]) if i > 0 and stats[i, cv2.CC_STAT_AREA] >= min_px]
+    mask = cv2.morphologyEx(lut[hue], cv2.MORPH_CLOSE, cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (5, 5)))
+    grouped = cv2.dilate(mask, cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (merge_px, merge_px)))
+    _, labels, stats, _ = cv2.connectedComponentsWithStats(grouped, connectivity=8)
+    labels[mask == 0] = 0
+    area = np.bincount(labels.ravel(), minlength=len(stats)).astype(float)
+    order = [i for i in np.argsort(-area, kind="stable") if i > 0 and area[i] >= min_px]
     blobs = []
     for i in order[:max_blobs]:
         x, y, w, h = stats[i, :4]
@@ -560,7 +598,8 @@ def seed_genes(pair: BlobPair, shape: ModelShape, space: GeneSpace, rng: np.rand
     phi = rng.uniform(-math.pi, math.pi, n)
     tilt[: max(1, n // 4)] = 0.0
     seeds[:, 4], seeds[:, 5] = tilt * np.cos(phi), tilt * np.sin(phi)
-    seeds[:, 6] = ls0 + np.abs(rng.normal(0, 0.1, n))
+    # the blob may be a fragment of the creature (foam, glints): scales up to x1.5 are as likely
+    seeds[:, 6] = ls0 + rng.uniform(-0.1, 0.4, n)
     return region.repair(seeds), region
 
 
@@ -602,35 +641,51 @@ def estimate(model: PhotoModel, left_bgr: np.ndarray, right_bgr: np.ndarray, rig
         islands.append(("global", PoseSearch(model, rig, frame, ga_params, p, fit_params, rng)))
     results = []
     evaluations = 0
-    for name, search in islands:
-        c = search.run()
-        results.append(Candidate(c.R, c.position_mm, c.alpha, c.fitness, c.generations, name))
+    firsts = [search.run(ambiguity_check=False) for _, search in islands]
+    # the look-alike twins (mirror, heading + 180 deg) are tried for the leading island only
+    lead = int(np.argmax([c.fitness for c in firsts]))
+    firsts[lead] = islands[lead][1].resolve_twins(firsts[lead])
+    for (name, search), c in zip(islands, firsts):
         evaluations += search.ga.evaluations
-    results.sort(key=lambda c: -c.fitness)
-    best = results[0]
-    found = bool(np.isfinite(best.fitness) and best.fitness >= p.threshold)
-    cands = tuple(_candidate_json(c, model, p) for c in results if np.isfinite(c.fitness))
+        if np.isfinite(c.fitness):
+            results.append((detection_score(c, model, frame, rig, fit_params),
+                            Candidate(c.R, c.position_mm, c.alpha, c.fitness, c.generations, name)))
+    results.sort(key=lambda sc: (-sc[0], -sc[1].fitness))
+    cands = tuple(_candidate_json(c, d, model, p) for d, c in results)
     seconds = time.perf_counter() - t0
-    if not found:
+    if not results or results[0][0] < p.threshold:
+        d, best = results[0] if results else (-math.inf, None)
         return Estimate(found=False, position_mm=None, rotation=None, alpha_px_per_mm=None, size_mm=None,
-                        fitness=float(best.fitness) if np.isfinite(best.fitness) else None,
-                        generations=best.generations, seconds=seconds,
-                        confidence=confidence(best.fitness, p), evaluations=evaluations, candidates=cands)
+                        fitness=None if best is None else float(best.fitness),
+                        generations=sum(s.ga.generation for _, s in islands), seconds=seconds,
+                        confidence=confidence(d, p), evaluations=evaluations, candidates=cands,
+                        detection_score=None if best is None else float(d))
+    d, best = results[0]
     return Estimate(found=True, position_mm=best.position_mm, rotation=best.R, alpha_px_per_mm=best.alpha,
                     size_mm=model.size_mm(best.alpha), fitness=best.fitness, generations=best.generations,
-                    seconds=seconds, confidence=confidence(best.fitness, p), evaluations=evaluations,
-                    candidates=cands)
+                    seconds=seconds, confidence=confidence(d, p), evaluations=evaluations,
+                    candidates=cands, detection_score=float(d))
 
 
-def _candidate_json(c: Candidate, model: PhotoModel, p: EstimatorParams) -> dict:
+def detection_score(c: Candidate, model: PhotoModel, frame: StereoHue, rig: Rig, fit_params: FitnessParams) -> float:
+    """The score `found` is decided on: the stereo fitness of the candidate with the two cameras
+    combined by their minimum (`[fitness] combine = "min"`), so a look-alike seen by one camera
+    only, or a pose that fits one image and not the other, cannot pass on the strength of one
+    camera (the GA itself optimises the configured combination)."""
+    strict = dataclasses.replace(fit_params, combine="min")
+    return float(fitness(c.R, c.position_mm, c.alpha, model, frame, rig, strict)[0])
+
+
+def _candidate_json(c: Candidate, score: float, model: PhotoModel, p: EstimatorParams) -> dict:
     return {
-        "found": bool(c.fitness >= p.threshold),
+        "found": bool(score >= p.threshold),
         "position_mm": [float(x) for x in c.position_mm],
         "rotation": [[float(x) for x in r] for r in c.R],
         "alpha_px_per_mm": float(c.alpha),
         "size_mm": [float(x) for x in model.size_mm(c.alpha)],
         "fitness": round(float(c.fitness), 6),
         "generations": int(c.generations),
-        "confidence": round(confidence(c.fitness, p), 4),
+        "detection_score": round(float(score), 6),
+        "confidence": round(confidence(score, p), 4),
         "source": c.source,
     }

@@ -1,0 +1,295 @@
+"""Accuracy of `estimate` from the DEFAULT search volume (issue 2 item 9, "accuracy").
+
+Scenes (vision/synthetic.random_scene, seeded): squid / crab / fish in turn at 300-1500 mm depth,
+random heading, tilt up to 40 deg, every effect on (waves, glints, sensor noise, blur, brightness,
+per-camera white balance, JPEG/MJPG chroma loss, bending, foam occlusion) and the written rig off
+from the rendering rig by a calibration error (0.1 deg stereo rotation, 0.5 % focal length).
+Odd scenes give the estimator the photo of ANOTHER individual (other-photo case); every fourth
+adds a look-alike elsewhere in view. Null scenes: empty water, and empty water with a look-alike
+(another species, a recoloured copy, or a buoy in the target's hue).
+
+Per target scene: position error (mm, % of distance), depth error (% of distance), heading error
+and tilt error (deg, separately: a swing-twist split about the model normal,
+vision/pose.heading_tilt_error), size error (%, |alpha_true / alpha_est - 1|: both sides of the
+box scale alike), generations, evaluations, wall seconds. Success: found and position error
+<= 5 % of the distance. "Converged <= 1 s": success, stopped by the convergence test (not the
+generation cap) and wall time <= 1 s. Null scenes: false-positive rate (found = true).
+
+Rows: the default configuration (configs/default.toml) and, on a subset, the paper's own
+configuration — 68-bit binary GA, 30 individuals, exactly 500 generations, (x, y, z, heading,
+tilt, alpha) genes in a narrow box around the truth (position +-100 mm with a random offset of
+the box centre up to 30 mm, any heading, tilt <= 60 deg, alpha within x/÷ 2) — and the default
+real-coded GA without blob seeding (one island over the whole volume).
+
+Threshold calibration (printed, and in the JSON): `found` is decided on the detection score
+(the fitness with the two cameras combined by their minimum) of the best candidate. The scores
+of the empty scenes, of the look-alike scenes and of the targets are compared; the suggested
+threshold lies midway between the worst empty scene and the targets' 5th percentile, with the
+false-positive and miss rates it would give. configs/default.toml takes that value.
+
+The machine has 2 cores shared with other jobs: wall times are medians on a loaded machine.
+Prints tables and writes benchmarks/out/accuracy.json.
+Run: /work/venv/bin/python benchmarks/accuracy.py [--quick] [--scenes 60] [--nulls 50]
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+import math
+import os
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+from photoservo.fileio import write_text_atomic
+from photoservo.servo.config import load_config
+from photoservo.vision.estimator import GeneSpace, PoseSearch, estimate
+from photoservo.vision.fitness import stereo_hue
+from photoservo.vision.ga import paper_params
+from photoservo.vision.photo_model import build_photo_model
+from photoservo.vision.pose import heading_tilt_error
+from photoservo.vision.synthetic import EFFECTS, random_scene
+
+KINDS = ("squid", "crab", "fish")
+SUCCESS_POS_FRAC = 0.05
+
+
+def make_scene(i: int, cfg, empty: bool = False, distractor: bool = False, other: bool = False):
+    sc = random_scene(1000 + i, cfg.synthetic, cfg.photo_model, kind=KINDS[i % 3], other_photo=other,
+                      effects=tuple(EFFECTS), empty=empty, distractor=distractor)
+    return sc, build_photo_model(sc.photo, cfg.photo_model)
+
+
+def errors(est, truth: dict) -> dict:
+    """Errors of an estimate (found or not) against a synthetic truth."""
+    z = truth["position_mm"][2]
+    row = {"found": bool(est.found), "distance_mm": z, "tilt_true_deg": truth["tilt_deg"],
+           "same_photo": truth["same_photo"], "fitness": est.fitness, "detection_score": est.detection_score,
+           "generations": est.generations,
+           "evaluations": est.evaluations, "seconds": est.seconds}
+    if not est.found:
+        row.update(pos_mm=math.inf, pos_pct=math.inf, depth_pct=math.inf, heading_deg=math.inf,
+                   tilt_deg=math.inf, size_pct=math.inf, success=False)
+        return row
+    t = np.array(truth["position_mm"])
+    pos = float(np.linalg.norm(est.position_mm - t))
+    h, ti = heading_tilt_error(np.array(truth["rotation"]), est.rotation)
+    row.update(pos_mm=pos, pos_pct=100 * pos / z, depth_pct=100 * abs(est.position_mm[2] - z) / z,
+               heading_deg=h, tilt_deg=ti, size_pct=100 * abs(truth["alpha_px_per_mm"] / est.alpha_px_per_mm - 1),
+               success=pos <= SUCCESS_POS_FRAC * z)
+    return row
+
+
+def run_paper(sc, model, cfg, seed: int):
+    """The paper's configuration: 68-bit GA, 30 individuals, 500 generations, narrow box."""
+    from photoservo.vision.estimator import Estimate
+
+    t0 = time.perf_counter()
+    ep = dataclasses.replace(cfg.estimator, genes="cartesian")
+    tr = sc.truth
+    rng = np.random.default_rng(seed)
+    frame = stereo_hue(sc.left, sc.right, cfg.fitness)
+    search = PoseSearch(model, sc.rig, frame, paper_params(), ep, cfg.fitness, rng)
+    centre = np.array(tr["position_mm"]) + rng.uniform(-30, 30, 3)
+    space = GeneSpace("cartesian", sc.rig, model, ep)
+    region = space.window(np.array(tr["rotation"]), centre, tr["alpha_px_per_mm"], position_mm=100.0,
+                          heading_deg=180.0, tilt_deg=120.0, alpha_frac=1.0)
+    lo, hi = region.lo.copy(), region.hi.copy()
+    lo[6], hi[6] = math.log(tr["alpha_px_per_mm"] / 2), math.log(tr["alpha_px_per_mm"] * 2)
+    from photoservo.vision.ga import Region
+
+    search.ga.reset(Region.box(lo, hi, region.periodic))
+    c = search.step(500)
+    found = c.fitness >= ep.threshold
+    return Estimate(found=found, position_mm=c.position_mm if found else None, rotation=c.R if found else None,
+                    alpha_px_per_mm=c.alpha if found else None, size_mm=model.size_mm(c.alpha) if found else None,
+                    fitness=c.fitness, generations=500, seconds=time.perf_counter() - t0, confidence=0.0,
+                    evaluations=search.ga.evaluations)
+
+
+def summary(rows: list[dict], max_generations: int) -> dict:
+    def q(key, p):
+        v = np.array([r[key] for r in rows], float)
+        if not len(v):
+            return math.nan
+        # misses count as infinite errors: no interpolation across them
+        return float(np.percentile(v, p, method="linear" if np.all(np.isfinite(v)) else "inverted_cdf"))
+    n = len(rows)
+    out = {"scenes": n}
+    for key in ("pos_mm", "pos_pct", "depth_pct", "heading_deg", "tilt_deg", "size_pct"):
+        out[key] = {"median": q(key, 50), "p90": q(key, 90)}
+    out["success_rate"] = sum(r["success"] for r in rows) / max(n, 1)
+    out["converged_1s_rate"] = sum(r["success"] and r["seconds"] <= 1.0 and r["generations"] < max_generations
+                                   for r in rows) / max(n, 1)
+    out["generations_median"] = q("generations", 50)
+    out["evaluations_median"] = q("evaluations", 50)
+    out["seconds_median"] = q("seconds", 50)
+    out["seconds_p90"] = q("seconds", 90)
+    return out
+
+
+def finite(o):
+    """JSON-safe copy: inf/nan -> None, numpy scalars -> Python."""
+    if isinstance(o, dict):
+        return {k: finite(v) for k, v in o.items()}
+    if isinstance(o, (list, tuple)):
+        return [finite(v) for v in o]
+    if isinstance(o, (bool, np.bool_)):
+        return bool(o)
+    if isinstance(o, (int, np.integer)):
+        return int(o)
+    if isinstance(o, (float, np.floating)):
+        return float(o) if math.isfinite(o) else None
+    return o
+
+
+def fmt_row(name: str, s: dict) -> str:
+    def mp(k, d=1):
+        return f"{s[k]['median']:.{d}f}/{s[k]['p90']:.{d}f}"
+    return (f"{name:<34} {s['scenes']:>3} {100 * s['success_rate']:5.0f}% {100 * s['converged_1s_rate']:5.0f}% "
+            f"{mp('pos_mm'):>12} {mp('pos_pct', 2):>11} {mp('depth_pct', 2):>11} {mp('heading_deg'):>10} "
+            f"{mp('tilt_deg'):>10} {mp('size_pct'):>10} {s['generations_median']:6.0f} {s['seconds_median']:6.2f}")
+
+
+HEADER = (f"{'configuration':<34} {'n':>3} {'succ':>6} {'<=1s':>6} {'pos mm':>12} {'pos %':>11} {'depth %':>11} "
+          f"{'head deg':>10} {'tilt deg':>10} {'size %':>10} {'gens':>6} {'sec':>6}\n"
+          f"{'':<34} {'':>3} {'':>6} {'':>6} {'med/p90':>12} {'med/p90':>11} {'med/p90':>11} {'med/p90':>10} "
+          f"{'med/p90':>10} {'med/p90':>10} {'med':>6} {'med':>6}")
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--quick", action="store_true", help="12 target + 8 null scenes, 4 baseline scenes")
+    ap.add_argument("--scenes", type=int, default=60, help="target scenes (default 60)")
+    ap.add_argument("--nulls", type=int, default=50, help="null scenes: half empty, half look-alike (default 50)")
+    ap.add_argument("--baseline", type=int, default=12, help="scenes for the paper / unseeded rows (default 12)")
+    ap.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE")
+    ap.add_argument("--out", default=str(Path(__file__).parent / "out" / "accuracy.json"))
+    a = ap.parse_args(argv)
+    if a.quick:
+        a.scenes, a.nulls, a.baseline = 12, 8, 4
+    cfg = load_config(None, a.overrides)
+    load = os.getloadavg()
+    print(f"accuracy benchmark: {a.scenes} target scenes, {a.nulls} null scenes; load average "
+          f"{load[0]:.1f} on {os.cpu_count()} cores (shared machine: wall times are medians under load)", flush=True)
+    # warm-up (JIT)
+    sc, model = make_scene(0, cfg)
+    estimate(model, sc.left, sc.right, sc.rig, cfg.ga, cfg.estimator, cfg.fitness, seed=0)
+
+    rows, scenes = [], []
+    for i in range(a.scenes):
+        other = i % 2 == 1
+        sc, model = make_scene(i, cfg, other=other, distractor=i % 4 == 3)
+        scenes.append((sc, model))
+        est = estimate(model, sc.left, sc.right, sc.rig, cfg.ga, cfg.estimator, cfg.fitness, seed=i)
+        r = errors(est, sc.truth)
+        r.update(seed=1000 + i, kind=KINDS[i % 3], distractor=i % 4 == 3)
+        rows.append(r)
+        print(f"  scene {i:3d} {r['kind']:<5} {'other' if other else 'same ':<5} z {r['distance_mm']:6.0f} "
+              f"tilt {r['tilt_true_deg']:4.1f}: {'found' if r['found'] else 'MISSED'} f={r['fitness'] or 0:.3f} "
+              f"pos {r['pos_pct']:.2f}% depth {r['depth_pct']:.2f}% head {r['heading_deg']:.1f} tilt {r['tilt_deg']:.1f} "
+              f"size {r['size_pct']:.1f}% gens {r['generations']} {r['seconds']:.2f}s", flush=True)
+
+    nulls = []
+    for j in range(a.nulls):
+        distractor = j % 2 == 1
+        sc, model = make_scene(500 + j, cfg, empty=True, distractor=distractor)
+        est = estimate(model, sc.left, sc.right, sc.rig, cfg.ga, cfg.estimator, cfg.fitness, seed=j)
+        nulls.append({"seed": 1500 + j, "look_alike": distractor, "found": bool(est.found),
+                      "fitness": est.fitness, "detection_score": est.detection_score, "seconds": est.seconds,
+                      "distractors": [d["kind"] for d in sc.truth["distractors"]]})
+        print(f"  null {j:3d} {'look-alike' if distractor else 'empty':<10}: {'FALSE POSITIVE' if est.found else 'not found'} "
+              f"best score={est.detection_score if est.detection_score is not None else float('nan'):.3f} "
+              f"{est.seconds:.2f}s", flush=True)
+
+    baseline_rows: dict[str, list[dict]] = {"paper (68-bit, 30 ind., 500 gen, narrow box)": [],
+                                            "default GA, no seeding (whole volume)": [],
+                                            "default, told the rendering rig (no calib. error)": []}
+    unseeded = dataclasses.replace(cfg.estimator, seeding=False, global_island=True)
+    for i in range(min(a.baseline, len(scenes))):
+        sc, model = scenes[i]
+        r = errors(run_paper(sc, model, cfg, seed=i), sc.truth)
+        baseline_rows["paper (68-bit, 30 ind., 500 gen, narrow box)"].append(r)
+        est = estimate(model, sc.left, sc.right, sc.rig, cfg.ga, unseeded, cfg.fitness, seed=i)
+        baseline_rows["default GA, no seeding (whole volume)"].append(errors(est, sc.truth))
+        est = estimate(model, sc.left, sc.right, sc.rig_true, cfg.ga, cfg.estimator, cfg.fitness, seed=i)
+        baseline_rows["default, told the rendering rig (no calib. error)"].append(errors(est, sc.truth))
+        print(f"  baseline scene {i}: paper pos {r['pos_pct']:.2f}% ; unseeded pos "
+              f"{baseline_rows['default GA, no seeding (whole volume)'][-1]['pos_pct']:.2f}%", flush=True)
+
+    maxg = cfg.estimator.max_generations
+    table = {
+        "default, all target scenes": summary(rows, maxg),
+        "default, same photo": summary([r for r in rows if r["same_photo"]], maxg),
+        "default, other photo": summary([r for r in rows if not r["same_photo"]], maxg),
+        "default, with a look-alike in view": summary([r for r in rows if r["distractor"]], maxg),
+    }
+    n_base = min(a.baseline, len(scenes))
+    table[f"default, first {n_base} scenes"] = summary(rows[:n_base], maxg)
+    for name, br in baseline_rows.items():
+        table[name] = summary(br, 500 if name.startswith("paper") else maxg)
+
+    def score(x):
+        return -1.0 if x is None else float(x)
+    empty_s = np.array([score(n["detection_score"]) for n in nulls if not n["look_alike"]])
+    look_s = np.array([score(n["detection_score"]) for n in nulls if n["look_alike"]])
+    tgt_s = np.array([score(r["detection_score"]) for r in rows if r["success"] or not r["found"]])
+    fp_empty = [n["found"] for n in nulls if not n["look_alike"]]
+    fp_look = [n["found"] for n in nulls if n["look_alike"]]
+    calib = {
+        "threshold_in_use": cfg.estimator.threshold,
+        "score": "detection_score (fitness with the cameras combined by min) of the best candidate",
+        "empty_scores": {"max": float(empty_s.max()) if len(empty_s) else None,
+                         "median": float(np.median(empty_s)) if len(empty_s) else None},
+        "look_alike_scores": {"max": float(look_s.max()) if len(look_s) else None,
+                              "median": float(np.median(look_s)) if len(look_s) else None},
+        "target_scores": {"min": float(tgt_s.min()) if len(tgt_s) else None,
+                          "p5": float(np.percentile(tgt_s, 5)) if len(tgt_s) else None,
+                          "median": float(np.median(tgt_s)) if len(tgt_s) else None},
+    }
+    if len(empty_s) and len(tgt_s):
+        # midway between the worst empty-water score and the 5th percentile of the targets
+        thr = round(float((empty_s.max() + np.percentile(tgt_s, 5)) / 2), 3)
+        calib["suggested_threshold"] = thr
+        calib["at_suggested"] = {"empty_fp_rate": float(np.mean(empty_s >= thr)),
+                                 "look_alike_fp_rate": float(np.mean(look_s >= thr)) if len(look_s) else None,
+                                 "target_miss_rate": float(np.mean(tgt_s < thr))}
+    fp = {"empty_scenes": len(fp_empty), "empty_false_positive_rate": float(np.mean(fp_empty)) if fp_empty else None,
+          "look_alike_scenes": len(fp_look),
+          "look_alike_false_positive_rate": float(np.mean(fp_look)) if fp_look else None}
+
+    print()
+    print(HEADER)
+    for name, s in table.items():
+        print(fmt_row(name, s))
+    print()
+    print(f"false positives: empty water {sum(fp_empty)}/{len(fp_empty)}, look-alike only {sum(fp_look)}/{len(fp_look)} "
+          f"(threshold {cfg.estimator.threshold})")
+    print(f"detection scores: empty water max {calib['empty_scores']['max']}, look-alikes max "
+          f"{calib['look_alike_scores']['max']}, targets p5 {calib['target_scores']['p5']} min {calib['target_scores']['min']}")
+    if "suggested_threshold" in calib:
+        at = calib["at_suggested"]
+        print(f"suggested detection threshold: {calib['suggested_threshold']} (midway between the worst empty scene "
+              f"and the targets' 5th percentile): empty FP {at['empty_fp_rate']:.2f}, look-alike FP "
+              f"{at['look_alike_fp_rate']}, target misses {at['target_miss_rate']:.2f}")
+    targets = {"converged_1s_rate": 0.95, "depth_pct_median": 1.0, "heading_deg_median": 2.0, "tilt_deg_median": 5.0,
+               "size_pct_median_same": 3.0, "size_pct_median_other": 6.0, "empty_false_positive_rate": 0.02}
+    out = {
+        "benchmark": "accuracy", "machine": {"cpus": os.cpu_count(), "load_average": load,
+                                             "note": "shared, loaded machine: wall times are medians under load"},
+        "config": {"ga": dataclasses.asdict(cfg.ga), "estimator": dataclasses.asdict(cfg.estimator)},
+        "targets": targets, "table": table, "false_positives": fp, "calibration": calib,
+        "scenes": rows, "nulls": nulls, "baselines": baseline_rows,
+        "python": sys.version.split()[0],
+    }
+    write_text_atomic(a.out, json.dumps(finite(out), indent=1))
+    print(f"wrote {a.out}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
