@@ -23,10 +23,12 @@ from photoservo.vision.ga import GAParams
 from photoservo.servo.control import ServoParams
 from photoservo.servo.motion import MotionParams
 from photoservo.servo.recording import RecordingParams
+from photoservo.servo.world import SimParams
 from photoservo.vision.fitness import FitnessParams
 from photoservo.vision.photo_model import PhotoModelParams
 from photoservo.vision.sources import CamerasParams
 from photoservo.vision.synthetic import SynthParams
+from photoservo.vision.tracker import TrackerParams
 
 
 @dataclass(frozen=True)
@@ -38,6 +40,8 @@ class Config:
     ga: GAParams
     estimator: EstimatorParams
     servo: ServoParams
+    tracker: TrackerParams
+    sim: SimParams
     synthetic: SynthParams
     link: LinkParams
     emulator: EmulatorParams

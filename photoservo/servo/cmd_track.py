@@ -1,0 +1,204 @@
+"""photoservo track [--sim] [--duration S] [--no-motion] [--collect] [--lockstep]
+                   [--rig RIG.toml --photo PHOTO --port PORT]  (hardware)
+                   [--record OUT.rrd | --no-record] [--view | --connect URL]
+                   [--config CFG.toml] [--set key=value ...] [--seed N] [--json]
+
+The main job: stereo frames -> a few GA generations per frame (vision/tracker.py) -> servo law
+(servo/control.py) -> Ruckig (servo/motion.py) -> serial link -> the PA-10, recorded to Rerun
+(logs/<UTC time>_track.rrd by default).
+
+With --sim (the default when no cameras ([cameras] kind) or --port are configured) it starts
+the controller emulator on a pty and the simulated world (servo/world.py): a creature drifting,
+heaving and rolling on the water, the stereo cameras on the simulated arm's flange. With
+`--lockstep` (or `--set sim.lockstep=true`) the simulation runs on its own clock instead of
+real time: slower than real time on this machine, but deterministic.
+
+The arm is enabled at start and disabled at exit; --no-motion tracks without commanding it.
+Live status on stderr; Ctrl-C stops the arm in a controlled way and closes the recording.
+
+Examples:
+    photoservo track --sim --duration 20
+    photoservo track --sim --duration 20 --collect --set sim.drift_mm_s=[20.0,10.0]
+    photoservo track --rig rig.toml --photo squid.jpg --port /dev/ttyUSB0 --set cameras.kind=\\"devices\\" ...
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+import time
+
+from photoservo import __version__
+from photoservo.errors import InputError
+from photoservo.servo.cmd_config import add_config_options
+from photoservo.servo.config import load_config
+from photoservo.tomlconf import dump_config
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--sim", action="store_true", help="run on the built-in simulator (default without hardware)")
+    p.add_argument("--duration", type=float, default=20.0, metavar="S", help="session length (s, default 20)")
+    p.add_argument("--no-motion", action="store_true", help="track without commanding the arm")
+    p.add_argument("--collect", action="store_true", help="collect the target once the hold is steady")
+    p.add_argument("--lockstep", action="store_true", help="simulation on its own clock (deterministic)")
+    p.add_argument("--rig", metavar="RIG.toml", help="hardware: calibrated rig with [hand_eye]")
+    p.add_argument("--photo", metavar="PHOTO", help="hardware: the photo of the creature to find")
+    p.add_argument("--port", metavar="PORT", help="hardware: the bridge's serial port or pyserial URL")
+    rec = p.add_mutually_exclusive_group()
+    rec.add_argument("--record", metavar="OUT.rrd", help="recording path (default logs/<UTC time>_track.rrd)")
+    rec.add_argument("--no-record", action="store_true", help="do not record")
+    view = p.add_mutually_exclusive_group()
+    view.add_argument("--view", action="store_true", help="spawn the Rerun viewer while recording")
+    view.add_argument("--connect", metavar="URL", help="stream to a running Rerun viewer as well")
+    p.add_argument("--seed", type=int, default=0, help="tracker seed (default 0)")
+    p.add_argument("--json", action="store_true", help="print the session summary as JSON on stdout")
+    add_config_options(p)
+
+
+class _StatusLine:
+    """Live status on stderr: one rewritten line on a terminal, a line per second otherwise."""
+
+    def __init__(self) -> None:
+        self.tty = sys.stderr.isatty()
+        self.last = -1.0
+
+    def __call__(self, d: dict) -> None:
+        if not self.tty and d["t"] - self.last < 1.0:
+            return
+        self.last = d["t"]
+        pos = d.get("position_mm")
+        pos_s = "-" if pos is None else "(" + ", ".join(f"{x:.0f}" for x in pos) + ") mm"
+        fit = d.get("fitness")
+        err = d.get("error_mm")
+        line = (f"t {d['t']:5.1f} s | {d.get('fps', float('nan')):4.1f} fps | {d['status']:<9} "
+                f"fit {(fit if fit is not None and math.isfinite(fit) else float('nan')):.2f} | "
+                f"pos {pos_s} | alpha {d['alpha'] or float('nan'):.2f} | "
+                f"err {err:.0f} mm {d['yaw_deg']:.1f} deg | {d['phase']}"
+                + (f" | stop: {d['stop']}" if d.get("stop") else ""))
+        if self.tty:
+            print("\r" + line[:160].ljust(160), end="", file=sys.stderr, flush=True)
+        else:
+            print(line, file=sys.stderr, flush=True)
+
+    def close(self) -> None:
+        if self.tty:
+            print(file=sys.stderr)
+
+
+def run(args: argparse.Namespace) -> int:
+    cfg = load_config(args.config, args.overrides)
+    if args.duration <= 0:
+        raise InputError(f"--duration {args.duration}: must be > 0 s")
+    hardware = bool(args.port) or cfg.cameras.kind != "none"
+    if hardware and args.sim:
+        raise InputError("--sim cannot be combined with --port or a configured [cameras] source")
+    if hardware:
+        return _run_hardware(args, cfg)
+    return _run_sim(args, cfg)
+
+
+def _recorder(args, cfg):
+    if args.no_record:
+        return None
+    from photoservo.servo.recording import Recorder
+
+    return Recorder.from_config(cfg.recording, "track", args.record, view=args.view, connect_url=args.connect)
+
+
+def _setup_static(rec, cfg, rig, photo, model, seed: int, extra: dict) -> None:
+    from photoservo.vision.rig import dump_rig
+
+    rec.log_static_setup(dump_rig(rig), photo, model, dump_config(cfg), {"tracker": seed, **extra},
+                         {"photoservo": __version__})
+
+
+def _report(args, sc, rec) -> int:
+    s = sc.summary()
+    if rec is not None:
+        s["recording"] = str(rec.path)
+    if args.json:
+        print(json.dumps(s, default=float))
+    else:
+        t = s["timings_ms_median"]
+        print(f"frames {s['frames']}, found {100 * s['found_ratio']:.0f} %, lost {s['lost_events']}, "
+              f"acquisitions {s['acquisitions']}, collected {s['collected']}")
+        if not math.isnan(s["rms_position_error_mm"]):
+            print(f"hold vs truth (after settling): {s['rms_position_error_mm']:.1f} mm RMS, "
+                  f"{s['rms_yaw_error_deg']:.2f} deg RMS yaw")
+        print("median ms: " + ", ".join(f"{k} {v:.1f}" for k, v in t.items()))
+        for f in s["faults"]:
+            print(f"fault: {f}")
+        if rec is not None:
+            print(f"recording: {rec.path}")
+    return 1 if s["faults"] else 0
+
+
+def _run_sim(args, cfg) -> int:
+    from photoservo.robot.emulator import Emulator
+    from photoservo.robot.link import Link
+    from photoservo.servo.session import SimCameras, build_sim, run_lockstep, run_realtime
+
+    sim = build_sim(cfg)
+    status = _StatusLine()
+    rec = _recorder(args, cfg)
+    try:
+        if rec is not None:
+            _setup_static(rec, cfg, sim.rig, sim.scene.photo, sim.scene.model, args.seed, {"sim": cfg.sim.seed})
+        if args.lockstep or cfg.sim.lockstep:
+            sc = run_lockstep(cfg, args.duration, collect=args.collect, no_motion=args.no_motion,
+                              recorder=rec, status=status, seed=args.seed, setup=sim)
+        else:
+            emu = Emulator(cfg.emulator, sim.limits, q0=sim.q0)
+            path = emu.start()
+            try:
+                with Link(path, cfg.link) as link:
+                    t0 = time.monotonic()
+                    cams = SimCameras(sim.scene, emu, sim.rig.T_flange_left(), cfg.sim.camera_fps, t0,
+                                      cfg.sim.lr_skew_s)
+                    sc = run_realtime(cfg, args.duration, arm=link, cameras=cams, model=sim.scene.model,
+                                      rig=sim.rig, collect=args.collect, no_motion=args.no_motion,
+                                      recorder=rec, status=status, seed=args.seed, scene=sim.scene, t0=t0)
+            finally:
+                emu.stop()
+    finally:
+        status.close()
+        if rec is not None:
+            rec.close()
+    return _report(args, sc, rec)
+
+
+def _run_hardware(args, cfg) -> int:
+    from photoservo.fileio import read_image
+    from photoservo.robot.link import Link
+    from photoservo.servo.session import ReaderCameras, run_realtime
+    from photoservo.vision.photo_model import build_photo_model
+    from photoservo.vision.rig import load_rig
+    from photoservo.vision.sources import LatestFrameReader, make_source, source_config
+
+    for flag in ("rig", "photo", "port"):
+        if not getattr(args, flag):
+            raise InputError(f"hardware tracking needs --{flag} (or use --sim)")
+    rig = load_rig(args.rig)
+    if rig.hand_eye is None:
+        raise InputError(f"{args.rig}: no [hand_eye] table: run `photoservo calibrate hand-eye` before servoing")
+    photo = read_image(args.photo, "photo")
+    model = build_photo_model(photo, cfg.photo_model)
+    src_cfg = source_config(cfg.cameras)
+    if src_cfg is None:
+        raise InputError("config key 'cameras.kind' is \"none\": configure the stereo cameras")
+    status = _StatusLine()
+    rec = _recorder(args, cfg)
+    try:
+        if rec is not None:
+            _setup_static(rec, cfg, rig, photo, model, args.seed, {})
+        with Link(args.port, cfg.link) as link, LatestFrameReader(make_source(src_cfg)) as reader:
+            sc = run_realtime(cfg, args.duration, arm=link, cameras=ReaderCameras(reader), model=model, rig=rig,
+                              collect=args.collect, no_motion=args.no_motion, recorder=rec,
+                              status=status, seed=args.seed)
+    finally:
+        status.close()
+        if rec is not None:
+            rec.close()
+    return _report(args, sc, rec)

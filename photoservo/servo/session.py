@@ -1,0 +1,550 @@
+"""The tracking session (issue 5): frames -> tracker -> servo law -> Ruckig -> link -> arm, with
+the recorder listening on the side.
+
+Two clocks, one code path for the control law:
+  * lockstep (`run_lockstep`): the simulator's clock. Control ticks at the control rate, camera
+    frames at the camera rate, each frame processed when it is delivered (capture + latency);
+    the arm is the emulator's bridge clocked by the simulation (world.LockstepArm). Deterministic.
+  * real time (`run_realtime`): time.monotonic. A control thread at the control rate (Rate) reads
+    the link's latest state, the latest track, and streams setpoints; the main thread captures
+    frames (real cameras, or the simulator rendering from the arm's interpolated state at each
+    exposure time) and runs the tracker.
+
+Collection (`--collect`) is a small state machine in `Controller`:
+  servo --(hold error within tolerance for hold_time_s)--> descend --(at collect height)-->
+  grasp (tool on, dwell) --> ascend --(back at hover)--> done; any loss of the target while
+  descending aborts: climb back to hover height (tool off) and servo again.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import threading
+import time
+from dataclasses import dataclass, field
+from typing import Callable, Literal
+
+import numpy as np
+
+from photoservo.robot import pa10
+from photoservo.robot import protocol as P
+from photoservo.robot.clock import Rate
+from photoservo.servo.config import Config
+from photoservo.servo.control import (
+    ServoParams,
+    camera_twist,
+    desired_camera_pose,
+    flange_twist,
+    make_pose,
+    pose_error,
+    yaw_error_deg,
+)
+from photoservo.servo.motion import Motion, Setpoint
+from photoservo.servo.world import LockstepArm, SimScene, sim_hand_eye
+from photoservo.vision.fitness import project_model, stereo_hue
+from photoservo.vision.rig import Rig
+from photoservo.vision.synthetic import synthetic_rig
+from photoservo.vision.tracker import Track, Tracker
+
+Phase = Literal["servo", "descend", "grasp", "ascend", "done", "stopped"]
+REACH_MM = 1250.0  # distance from the shoulder (S2 axis) beyond which the PA-10 cannot hover
+
+
+@dataclass
+class ControlInfo:
+    """What one control period decided (for the status line, the recording and the scores)."""
+
+    t: float
+    phase: Phase
+    setpoint: Setpoint
+    T_base_cam: np.ndarray
+    T_base_cam_des: np.ndarray | None
+    position_error_mm: float
+    yaw_error_deg: float
+    stop_reason: str
+    tool: bool
+
+
+@dataclass
+class Controller:
+    """One control period of position-based visual servoing (servo/control.py) on the PA-10:
+    camera twist -> flange twist -> joint velocities by damped least squares (robot/pa10.py,
+    null space pulled toward HOME_Q) -> Ruckig velocity interface with the safety layer
+    (servo/motion.py). A controlled stop when the track is missing or older than
+    max_estimate_age_s, or the target leaves the reachable workspace."""
+
+    params: ServoParams
+    motion: Motion
+    T_flange_left: np.ndarray
+    T_left_centre: np.ndarray
+    collect: bool = False
+    no_motion: bool = False
+    phase: Phase = "servo"
+    height_mm: float = field(default=0.0)
+    t_hold_start: float | None = None
+    t_grasp: float | None = None
+    tool_on: bool = False
+    collected: bool = False
+    events: list[tuple[float, str]] = field(default_factory=list)
+
+    def __post_init__(self) -> None:
+        self.height_mm = self.params.hover_mm
+
+    def _event(self, t: float, text: str) -> None:
+        self.events.append((t, text))
+
+    def step(self, now: float, q: np.ndarray, dq: np.ndarray, track: Track | None) -> ControlInfo:
+        p = self.params
+        dt = self.motion.dt
+        T_base_cam = pa10.fk(q) @ self.T_flange_left
+        stop = ""
+        if track is None or track.T_base_model is None:
+            stop = "no target"
+        elif now - track.t > p.max_estimate_age_s:
+            stop = f"estimate {1e3 * (now - track.t):.0f} ms old"
+        T_des = None
+        if not stop:
+            T_target = track.T_base_model.copy()
+            T_target[:3, 3] += track.velocity_mm_s * (now - track.t)
+            if np.linalg.norm(T_target[:3, 3] - np.array([0.0, 0.0, pa10.DH_D_MM[0]])) > REACH_MM:
+                stop = "target out of reach"
+            else:
+                self._advance_collection(now, dt)
+                T_des = desired_camera_pose(T_target, track.size_mm, self.height_mm, T_base_cam[:3, :3],
+                                            self.T_left_centre)
+        elif self.phase in ("descend", "grasp"):
+            self._event(now, f"collection aborted: {stop}; climbing back")
+            self.phase, self.tool_on = "ascend", False
+        e_p = np.full(3, np.nan)
+        yaw = float("nan")
+        if T_des is not None:
+            e_p, e_R = pose_error(T_base_cam, T_des)
+            yaw = yaw_error_deg(T_base_cam, T_des)
+            self._update_hold(now, float(np.linalg.norm(e_p)), yaw)
+            v, w = camera_twist(e_p, e_R, track.velocity_mm_s, p)
+            T_base_flange = pa10.fk(q)
+            twist = flange_twist(v, w, T_base_cam[:3, 3], T_base_flange[:3, 3])
+            dq_target = pa10.dls_step(q, twist, p.damping, k_null=0.5)
+            sp = self.motion.velocity_step(q, dq, dq_target)
+        else:
+            sp = self.motion.stop_step(q, dq, reason=stop)
+        return ControlInfo(now, self.phase, sp, T_base_cam, T_des, float(np.linalg.norm(e_p)), yaw,
+                           stop or sp.reason, self.tool_on)
+
+    def _update_hold(self, now: float, err_mm: float, yaw_deg: float) -> None:
+        p = self.params
+        ok = err_mm <= p.hold_tolerance_mm and yaw_deg <= p.hold_tolerance_deg
+        if not ok:
+            self.t_hold_start = None
+        elif self.t_hold_start is None:
+            self.t_hold_start = now
+        if (self.collect and self.phase == "servo" and self.t_hold_start is not None
+                and now - self.t_hold_start >= p.hold_time_s and not self.collected):
+            self.phase = "descend"
+            self._event(now, f"holding within {p.hold_tolerance_mm:.0f} mm for {p.hold_time_s:.1f} s: descending")
+
+    def _advance_collection(self, now: float, dt: float) -> None:
+        p = self.params
+        if self.phase == "descend":
+            self.height_mm = max(p.collect_height_mm, self.height_mm - p.collect_speed_mm_s * dt)
+            if self.height_mm <= p.collect_height_mm:
+                self.phase, self.t_grasp, self.tool_on = "grasp", now, True
+                self._event(now, "at collection height: tool on")
+        elif self.phase == "grasp":
+            if now - self.t_grasp >= p.tool_dwell_s:
+                self.phase = "ascend"
+                self.collected = True
+                self._event(now, "tool dwell over: ascending with the catch")
+        elif self.phase == "ascend":
+            self.height_mm = min(p.hover_mm, self.height_mm + p.collect_speed_mm_s * dt)
+            if self.height_mm >= p.hover_mm:
+                self.phase = "done" if self.collected else "servo"
+                self._event(now, "collection complete" if self.collected else "back at hover height")
+
+
+def left_centre(rig) -> np.ndarray:
+    """Midpoint of the two optical centres in the left camera frame (mm)."""
+    return -rig.R.T @ rig.T / 2.0
+
+
+StatusFn = Callable[[dict], None]
+
+
+# ----------------------------------------------------------------------------- scoring
+
+
+@dataclass
+class Scores:
+    """Per-run numbers: hold accuracy against the TRUE desired pose (simulation), tracking."""
+
+    frames: int = 0
+    found: int = 0
+    lost_events: int = 0
+    acquisitions: int = 0
+    err_sq: list[float] = field(default_factory=list)  # position error^2 vs truth, t >= settle_s
+    yaw_sq: list[float] = field(default_factory=list)
+    max_err_mm: float = 0.0
+    timings_ms: dict[str, list[float]] = field(default_factory=dict)
+    collected: bool = False
+    faults: list[str] = field(default_factory=list)
+    distractor_min_mm: float = float("inf")  # closest the cameras' hover point came to the look-alike
+    dropped_frames: int = 0  # frames with no arm state at their capture time
+
+    def time(self, stage: str, ms: float) -> None:
+        self.timings_ms.setdefault(stage, []).append(ms)
+
+    def summary(self) -> dict:
+        rms = math.sqrt(float(np.mean(self.err_sq))) if self.err_sq else float("nan")
+        yaw = math.sqrt(float(np.mean(self.yaw_sq))) if self.yaw_sq else float("nan")
+        return {
+            "frames": self.frames, "found_ratio": self.found / max(1, self.frames),
+            "lost_events": self.lost_events, "acquisitions": self.acquisitions,
+            "dropped_frames": self.dropped_frames,
+            "rms_position_error_mm": rms, "rms_yaw_error_deg": yaw, "max_position_error_mm": self.max_err_mm,
+            "collected": self.collected, "faults": list(self.faults),
+            "timings_ms_median": {k: float(np.median(v)) for k, v in self.timings_ms.items()},
+            "distractor_min_mm": self.distractor_min_mm,
+        }
+
+
+# ----------------------------------------------------------------------------- the simulator run
+
+
+@dataclass
+class SimSetup:
+    """Everything the simulated session starts from."""
+
+    rig: Rig
+    scene: SimScene
+    limits: pa10.PA10Limits
+    q0: np.ndarray  # arm start: start_offset_mm and start_yaw_deg off the desired pose
+
+
+def build_sim(cfg: Config) -> SimSetup:
+    """The simulated rig (synthetic_rig with the simulator's hand-eye), scene and arm start."""
+    base = synthetic_rig()
+    rig = Rig(base.left, base.right, base.R, base.T, hand_eye=sim_hand_eye(base))
+    scene = SimScene(cfg.sim, cfg.photo_model, rig)
+    limits = pa10.load_limits()
+    T_fl = rig.T_flange_left()
+    centre = left_centre(rig)
+    T_des = desired_camera_pose(scene.motion.pose(0.0), scene.size_mm(), cfg.servo.hover_mm,
+                                np.diag([-1.0, 1.0, -1.0]), centre)
+    yaw = math.radians(cfg.sim.start_yaw_deg)
+    Rz = np.array([[math.cos(yaw), -math.sin(yaw), 0], [math.sin(yaw), math.cos(yaw), 0], [0, 0, 1.0]])
+    c_des = T_des[:3, :3] @ centre + T_des[:3, 3]  # rig centre over the target
+    R0 = Rz @ T_des[:3, :3]
+    c0 = c_des + np.array([-cfg.sim.start_offset_mm, 0.0, 0.0])
+    T_cam0 = make_pose(R0, c0 - R0 @ centre)
+    q0 = pa10.ik(T_cam0 @ np.linalg.inv(T_fl), pa10.HOME_Q, limits)
+    return SimSetup(rig, scene, limits, q0)
+
+
+@dataclass
+class Frame:
+    """A stereo frame in flight: captured at t_left/t_right, delivered at t_delivery."""
+
+    index: int
+    t_left: float
+    t_right: float
+    t_delivery: float
+    left: np.ndarray
+    right: np.ndarray
+    T_base_left: np.ndarray  # left camera at t_left (from the arm's state then)
+
+
+def run_lockstep(cfg: Config, duration_s: float, *, collect: bool = False, no_motion: bool = False,
+                 recorder=None, status: StatusFn | None = None, seed: int = 0,
+                 settle_s: float = 5.0, setup: SimSetup | None = None) -> Scores:
+    """A simulated session on the simulator's clock (deterministic). Returns the scores; hold
+    accuracy is measured against the desired pose of the TRUE target from `settle_s` on."""
+    sim = setup or build_sim(cfg)
+    rig, scene = sim.rig, sim.scene
+    T_fl = rig.T_flange_left()
+    centre = left_centre(rig)
+    arm = LockstepArm(cfg.emulator, sim.limits, sim.q0)
+    if not no_motion:
+        arm.enable()
+    ctrl = Controller(cfg.servo, Motion(cfg.motion, sim.limits), T_fl, centre, collect=collect,
+                      no_motion=no_motion)
+    tracker = Tracker(scene.model, rig, cfg.tracker, cfg.ga, cfg.estimator, cfg.fitness, seed)
+    tracker.use_time_budget = False  # generations, not wall time, decide: deterministic
+    sc = Scores()
+    dt = 1.0 / cfg.motion.rate_hz
+    frame_dt = 1.0 / cfg.sim.camera_fps
+    n_ticks = int(round(duration_s / dt))
+    next_capture, k = 0.0, 0
+    in_flight: list[Frame] = []
+    track: Track | None = None
+    prev_status = None
+    tool = False
+    n_events = 0
+    for i in range(n_ticks):
+        now = i * dt
+        while next_capture <= now + 1e-9:
+            t_l, t_r = next_capture, next_capture + cfg.sim.lr_skew_s
+            T_l = pa10.fk(arm.state_at(t_l).q) @ T_fl
+            T_r = pa10.fk(arm.state_at(min(t_r, now)).q) @ T_fl
+            c0 = time.perf_counter()
+            left, right = scene.render(T_l, t_l, T_r, t_r)
+            sc.time("render", 1e3 * (time.perf_counter() - c0))
+            in_flight.append(Frame(k, t_l, t_r, t_l + cfg.sim.capture_latency_s, left, right, T_l))
+            k += 1
+            next_capture = k * frame_dt
+        while in_flight and in_flight[0].t_delivery <= now + 1e-9:
+            fr = in_flight.pop(0)
+            track = _vision_step(fr, tracker, cfg, sc, recorder, scene)
+            if track.status != prev_status:
+                if track.status == "lost":
+                    sc.lost_events += 1
+                _emit(recorder, ctrl, fr.t_delivery, f"track {track.status}")
+                prev_status = track.status
+        st = arm.state()
+        c0 = time.perf_counter()
+        info = ctrl.step(now, st.q, st.dq, track)
+        sc.time("control", 1e3 * (time.perf_counter() - c0))
+        if not no_motion:
+            arm.send_setpoint(info.setpoint.q, info.setpoint.dq, now)
+            if info.tool != tool:
+                arm.tool(info.tool)
+                tool = info.tool
+        while n_events < len(ctrl.events):
+            t_e, text = ctrl.events[n_events]
+            if recorder is not None:
+                recorder.event(t_e, text)
+            n_events += 1
+        _score_hold(sc, ctrl, scene, info, now, settle_s, centre)
+        if recorder is not None and i % 5 == 0:
+            recorder.log_arm(now, st.q, info.setpoint.q, info.setpoint.dq)
+            if info.T_base_cam_des is not None:
+                recorder.log_desired(now, info.T_base_cam_des)
+        if status is not None and i % int(round(0.5 / dt)) == 0:
+            status(_status_dict(now, sc, track, info))
+        arm.tick(now + dt)
+    sc.collected = ctrl.collected
+    sc.acquisitions = tracker.acquisitions
+    sc.faults += [f"bridge refused setpoint: {P.Error(n.error).name}" for n in arm.nacks]
+    return sc
+
+
+def _emit(recorder, ctrl: Controller, t: float, text: str) -> None:
+    ctrl.events.append((t, text))
+
+
+def _vision_step(fr: Frame, tracker: Tracker, cfg: Config, sc: Scores, recorder, scene: SimScene | None) -> Track:
+    """One frame through the tracker, timed and recorded."""
+    c0 = time.perf_counter()
+    hue = stereo_hue(fr.left, fr.right, cfg.fitness)
+    c1 = time.perf_counter()
+    track = tracker.update(hue, fr.left, fr.right, fr.T_base_left, fr.t_left)
+    c2 = time.perf_counter()
+    sc.time("hue", 1e3 * (c1 - c0))
+    sc.time("ga", 1e3 * (c2 - c1))
+    sc.frames += 1
+    sc.found += int(track.found)
+    if recorder is not None:
+        c3 = time.perf_counter()
+        recorder.log_frame(fr.index, fr.t_left, fr.left, fr.right, T_base_left=fr.T_base_left,
+                           capture_times=(fr.t_left, fr.t_right))
+        proj = None
+        if track.R_left is not None:
+            proj = project_model(track.R_left[None], track.t_left[None], np.array([track.alpha_measured]),
+                                 tracker.model, tracker.rig)
+        recorder.log_estimate(fr.index, fr.t_left, found=track.found, fitness=track.fitness,
+                              R=track.R_left, position_mm=track.t_left, alpha=track.alpha_measured,
+                              size_mm=track.size_mm, generations=track.generations,
+                              T_base_left=fr.T_base_left, projection=proj)
+        if scene is not None:
+            recorder.log_truth(fr.index, fr.t_left, scene.motion.pose(fr.t_left), scene.size_mm())
+        recorder.log_timings(fr.t_left, {"hue": 1e3 * (c1 - c0), "ga": 1e3 * (c2 - c1),
+                                         "record": 1e3 * (time.perf_counter() - c3)}, frame=fr.index)
+    return track
+
+
+def _score_hold(sc: Scores, ctrl: Controller, scene: SimScene, info: ControlInfo, now: float,
+                settle_s: float, centre: np.ndarray, T_true_time: float | None = None) -> None:
+    """Camera pose error against the desired pose of the TRUE target (simulation only); `now`
+    is scene time (s)."""
+    T_true = scene.motion.pose(now if T_true_time is None else T_true_time)
+    T_des = desired_camera_pose(T_true, scene.size_mm(), ctrl.height_mm, info.T_base_cam[:3, :3], centre)
+    e_p, _ = pose_error(info.T_base_cam, T_des)
+    if scene.distractor_motion is not None:
+        c = info.T_base_cam[:3, :3] @ centre + info.T_base_cam[:3, 3]
+        d = scene.distractor_motion.pose(now)[:3, 3]
+        sc.distractor_min_mm = min(sc.distractor_min_mm, float(np.linalg.norm((c - d)[:2])))
+    if now >= settle_s and ctrl.phase == "servo":
+        err = float(np.linalg.norm(e_p))
+        sc.err_sq.append(err * err)
+        sc.yaw_sq.append(yaw_error_deg(info.T_base_cam, T_des) ** 2)
+        sc.max_err_mm = max(sc.max_err_mm, err)
+
+
+def _status_dict(now: float, sc: Scores, track: Track | None, info: ControlInfo) -> dict:
+    pos = None if track is None or track.T_base_model is None else track.T_base_model[:3, 3]
+    return {"t": now, "frames": sc.frames, "found": bool(track and track.found),
+            "status": track.status if track else "acquiring",
+            "fitness": None if track is None else track.fitness,
+            "position_mm": pos, "alpha": None if track is None else track.alpha,
+            "error_mm": info.position_error_mm, "yaw_deg": info.yaw_error_deg, "phase": info.phase,
+            "stop": info.stop_reason}
+
+
+# ----------------------------------------------------------------------------- real time
+
+
+class SimCameras:
+    """The simulator's stereo cameras in real time: each call exposes a pair NOW on the monotonic
+    clock, rendered from where the emulated arm truly is (its bridge's joint state), paced at the
+    camera rate. The loop learns where the cameras were from the link, as on hardware."""
+
+    def __init__(self, scene: SimScene, emulator, T_flange_left: np.ndarray, fps: float, t0: float,
+                 skew_s: float) -> None:
+        self.scene, self.emulator, self.T_fl = scene, emulator, T_flange_left
+        self.period, self.t0, self.skew = 1.0 / fps, t0, skew_s
+        self.t_next = t0
+        self.index = 0
+
+    def read(self) -> tuple[int, np.ndarray, np.ndarray, float, float]:
+        now = time.monotonic()
+        if now < self.t_next:
+            time.sleep(self.t_next - now)
+        self.t_next = max(self.t_next + self.period, time.monotonic() - self.period)
+        t_l = time.monotonic()
+        T_l = pa10.fk(self.emulator.true_state().q) @ self.T_fl
+        left, right = self.scene.render(T_l, t_l - self.t0, T_l, t_l + self.skew - self.t0)
+        self.index += 1
+        return self.index - 1, left, right, t_l, t_l + self.skew
+
+
+class ReaderCameras:
+    """Real cameras for `run_realtime`: the newest pair of a `vision.sources.LatestFrameReader`."""
+
+    def __init__(self, reader, timeout_s: float = 0.5) -> None:
+        self.reader, self.timeout_s = reader, timeout_s
+
+    def read(self) -> tuple[int, np.ndarray, np.ndarray, float, float] | None:
+        f = self.reader.latest(timeout_s=self.timeout_s)
+        return None if f is None else (f.index, f.left, f.right, f.t_left, f.t_right)
+
+
+def run_realtime(cfg: Config, duration_s: float, *, arm, cameras, model, rig: Rig,
+                 collect: bool = False, no_motion: bool = False, recorder=None,
+                 status: StatusFn | None = None, seed: int = 0, scene: SimScene | None = None,
+                 t0: float | None = None, settle_s: float = 5.0,
+                 stop_event: threading.Event | None = None) -> Scores:
+    """The real-time loop: a control thread at the control rate streams setpoints to `arm` (a
+    `robot.link.Link`, opened), the calling thread reads stereo frames from `cameras` (its
+    `read()` -> (index, left, right, t_left, t_right) on the monotonic clock), runs the tracker
+    and publishes the track. Any link fault or exception stops the arm (controlled stop) before
+    returning or raising. `scene` (simulation) scores hold accuracy against the truth."""
+    T_fl = rig.T_flange_left()
+    centre = left_centre(rig)
+    limits = pa10.load_limits()
+    ctrl = Controller(cfg.servo, Motion(cfg.motion, limits), T_fl, centre, collect=collect, no_motion=no_motion)
+    tracker = Tracker(model, rig, cfg.tracker, cfg.ga, cfg.estimator, cfg.fitness, seed)
+    sc = Scores()
+    t0 = time.monotonic() if t0 is None else t0
+    stop = stop_event or threading.Event()
+    lock = threading.Lock()
+    shared: dict = {"track": None, "info": None, "fault": ""}
+
+    def control() -> None:
+        rate = Rate(cfg.motion.rate_hz)
+        tool = False
+        i = 0
+        try:
+            while not stop.is_set():
+                now = time.monotonic()
+                st = arm.state()
+                with lock:
+                    track = shared["track"]
+                info = ctrl.step(now, st.q, st.dq, track)
+                if not no_motion:
+                    arm.send_setpoint(info.setpoint.q, info.setpoint.dq, now)
+                    if info.tool != tool:
+                        arm.tool(info.tool)
+                        tool = info.tool
+                if scene is not None:
+                    _score_hold(sc, ctrl, scene, info, now - t0, settle_s, centre, T_true_time=now - t0)
+                with lock:
+                    shared["info"] = info
+                if recorder is not None and i % 5 == 0:
+                    recorder.log_arm(now - t0, st.q, info.setpoint.q, info.setpoint.dq)
+                    if info.T_base_cam_des is not None:
+                        recorder.log_desired(now - t0, info.T_base_cam_des)
+                i += 1
+                sc.time("control_ms", 1e3 * (time.monotonic() - now))
+                late = rate.sleep()
+                sc.time("control_late", 1e3 * late)
+        except Exception as e:  # noqa: BLE001 - a fault while moving stops the arm, then reported
+            with lock:
+                shared["fault"] = f"{type(e).__name__}: {e}"
+            stop.set()
+
+    thread = threading.Thread(target=control, name="control", daemon=True)
+    if not no_motion:
+        arm.enable()
+    thread.start()
+    prev = None
+    n_events = 0
+    try:
+        while not stop.is_set() and time.monotonic() - t0 < duration_s:
+            c0 = time.perf_counter()
+            got = cameras.read()
+            if got is None:
+                continue
+            k, left, right, t_l, t_r = got
+            sc.time("capture", 1e3 * (time.perf_counter() - c0))
+            try:
+                T_l = pa10.fk(arm.state_at(t_l).q) @ T_fl
+            except LookupError as e:  # no arm state for the capture time: cannot place the frame
+                sc.dropped_frames += 1
+                if sc.dropped_frames == 1:
+                    ctrl.events.append((time.monotonic() - t0, f"frame dropped: {e}"))
+                continue
+            fr = Frame(k, t_l - t0, t_r - t0, time.monotonic() - t0, left, right, T_l)
+            track = _vision_step(fr, tracker, cfg, sc, recorder, scene)
+            track = _shift_time(track, t0)
+            with lock:
+                shared["track"] = track
+                info = shared["info"]
+            if track.status != prev:
+                sc.lost_events += track.status == "lost"
+                ctrl.events.append((fr.t_left, f"track {track.status}"))
+                prev = track.status
+            while n_events < len(ctrl.events):
+                if recorder is not None:
+                    recorder.event(ctrl.events[n_events][0], ctrl.events[n_events][1])
+                n_events += 1
+            sc.time("frame", 1e3 * (time.perf_counter() - c0))
+            if status is not None and info is not None:
+                d = _status_dict(time.monotonic() - t0, sc, track, info)
+                d["fps"] = 1e3 / float(np.median(sc.timings_ms["frame"][-30:]))
+                status(d)
+    finally:
+        stop.set()
+        thread.join(timeout=2.0)
+        if shared["fault"]:
+            sc.faults.append(shared["fault"])
+        if not no_motion:
+            _controlled_stop(arm, sc)
+        sc.collected = ctrl.collected
+        sc.acquisitions = tracker.acquisitions
+    return sc
+
+
+def _shift_time(track: Track, t0: float) -> Track:
+    """The tracker ran on session time (s since t0); the control thread reads monotonic time."""
+    return dataclasses.replace(track, t=track.t + t0)
+
+
+def _controlled_stop(arm, sc: Scores) -> None:
+    """Stop the arm in a controlled way and switch the servo off; a link that is already gone
+    leaves the bridge's own watchdog to stop it (noted as a fault)."""
+    try:
+        arm.stop()
+        arm.wait_until_still(timeout=3.0)
+        arm.disable()
+    except Exception as e:  # noqa: BLE001
+        sc.faults.append(f"controlled stop via the link failed ({e}); the bridge watchdog stops the arm")

@@ -1,0 +1,282 @@
+"""The simulated world for `photoservo track --sim` (issue 5, Simulator): a water plane in the arm's
+base frame, a target built from a photo and an alpha that drifts, heaves, rolls and pitches with
+the waves, optionally a look-alike distractor, and the cameras on the simulated PA-10's flange.
+
+Frames: base frame of the PA-10 (z up, mm). The target's model frame is DESIGN.md's (x along the
+photo's columns, y along its rows, z into the photo): a target lying face-up on the water has its
+model z pointing down, i.e. R_base_model = Rz(heading) · Rx(roll) · Ry(pitch) · Rx(180°).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+from photoservo.errors import InputError
+from photoservo.fileio import read_image
+from photoservo.robot import protocol as P
+from photoservo.robot.emulator import BridgeModel, EmulatorParams
+from photoservo.robot.link import LinkError
+from photoservo.robot.pa10 import PA10Limits
+from photoservo.vision.photo_model import PhotoModelParams, build_photo_model
+from photoservo.vision.rig import Rig
+from photoservo.vision.specimens import specimen
+from photoservo.vision.synthetic import (
+    CameraEffects,
+    Scene,
+    StereoRenderer,
+    calm_water,
+    floater_from_model,
+    render_view,
+)
+
+FACE_UP = np.diag([1.0, -1.0, -1.0])  # Rx(180 deg): model z down into the water
+
+
+@dataclass(frozen=True)
+class SimParams:
+    """[sim] config: the simulated scene, target motion and cameras."""
+
+    seed: int  # seeds the scene's textures, waves and noise
+    specimen: str  # procedural photo of the target: squid, crab or fish
+    photo: str  # a photo file instead of the specimen ("" = use the specimen)
+    alpha_px_per_mm: float  # true pixel-per-mm ratio of the photo for the simulated creature
+    water_z_mm: float  # water surface height in the base frame (mm)
+    target_start_mm: tuple[float, float]  # target start (x, y) on the water, base frame (mm)
+    heading_deg: float  # target heading at start (deg, about base z)
+    drift_mm_s: tuple[float, float]  # drift velocity on the water (mm/s)
+    heave_mm: float  # heave amplitude (mm)
+    heave_period_s: float
+    roll_deg: float  # roll amplitude about the target's x axis (deg)
+    roll_period_s: float
+    pitch_deg: float  # pitch amplitude about the target's y axis (deg)
+    pitch_period_s: float
+    distractor: bool  # add a look-alike creature
+    distractor_offset_mm: tuple[float, float]  # its offset from the target's start (mm)
+    camera_fps: float  # simulated camera frame rate (Hz)
+    capture_latency_s: float  # time from exposure to the frame reaching the loop (s)
+    lr_skew_s: float  # right camera's exposure delay after the left (s)
+    start_offset_mm: float  # arm starts this far (horizontally) from the desired pose (mm)
+    start_yaw_deg: float  # ... and yawed this much from it (deg)
+    lockstep: bool  # true: simulated clock (deterministic); false: real time
+
+    def validate(self, where: str) -> None:
+        if self.alpha_px_per_mm <= 0:
+            raise InputError(f"config key '{where}.alpha_px_per_mm' must be > 0, got {self.alpha_px_per_mm}")
+        for name in ("heave_period_s", "roll_period_s", "pitch_period_s", "camera_fps"):
+            if getattr(self, name) <= 0:
+                raise InputError(f"config key '{where}.{name}' must be > 0, got {getattr(self, name)}")
+        if self.specimen not in ("squid", "crab", "fish"):
+            raise InputError(f"config key '{where}.specimen' must be squid, crab or fish, got {self.specimen!r}")
+
+
+def _rot(axis: int, angle: float) -> np.ndarray:
+    v = np.zeros(3)
+    v[axis] = angle
+    return cv2.Rodrigues(v)[0]
+
+
+@dataclass(frozen=True)
+class TargetMotion:
+    """Closed-form target motion on the water: constant drift plus sinusoidal heave, roll and
+    pitch. All in the base frame (mm, rad, s)."""
+
+    p0: np.ndarray  # (3,) start position on the water surface
+    heading: float  # rad
+    v: np.ndarray  # (3,) drift velocity (horizontal)
+    heave: float
+    heave_period: float
+    roll: float  # rad
+    roll_period: float
+    pitch: float  # rad
+    pitch_period: float
+
+    @classmethod
+    def from_params(cls, p: SimParams, offset_xy: tuple[float, float] = (0.0, 0.0),
+                    heading_offset_deg: float = 0.0) -> "TargetMotion":
+        x, y = p.target_start_mm
+        return cls(
+            p0=np.array([x + offset_xy[0], y + offset_xy[1], p.water_z_mm]),
+            heading=math.radians(p.heading_deg + heading_offset_deg),
+            v=np.array([p.drift_mm_s[0], p.drift_mm_s[1], 0.0]),
+            heave=p.heave_mm, heave_period=p.heave_period_s,
+            roll=math.radians(p.roll_deg), roll_period=p.roll_period_s,
+            pitch=math.radians(p.pitch_deg), pitch_period=p.pitch_period_s,
+        )
+
+    def pose(self, t: float) -> np.ndarray:
+        """T_base_model(t): the target's model frame in the base frame at time t (s)."""
+        w_h, w_r, w_p = (2 * math.pi / self.heave_period, 2 * math.pi / self.roll_period,
+                         2 * math.pi / self.pitch_period)
+        R = (_rot(2, self.heading) @ _rot(0, self.roll * math.sin(w_r * t))
+             @ _rot(1, self.pitch * math.sin(w_p * t + 1.0)) @ FACE_UP)
+        T = np.eye(4)
+        T[:3, :3] = R
+        T[:3, 3] = self.p0 + self.v * t + np.array([0.0, 0.0, self.heave * math.sin(w_h * t)])
+        return T
+
+    def velocity(self, t: float) -> np.ndarray:
+        """Linear velocity of the model origin at time t (mm/s, base frame)."""
+        w_h = 2 * math.pi / self.heave_period
+        return self.v + np.array([0.0, 0.0, self.heave * w_h * math.cos(w_h * t)])
+
+
+# ----------------------------------------------------------------------------- the scene
+
+
+def sim_hand_eye(rig: Rig, standoff_mm: float = 100.0) -> tuple[np.ndarray, np.ndarray]:
+    """The simulator's hand-eye transform (X_flange = R · X_left + t): cameras looking along the
+    flange's z axis, the rig's centre on the flange axis `standoff_mm` beyond the tool plate."""
+    centre_in_left = -rig.R.T @ rig.T / 2.0  # midpoint of the optical centres, left frame
+    return np.eye(3), np.array([0.0, 0.0, standoff_mm]) - centre_in_left
+
+
+class SimScene:
+    """What the simulated cameras see: water at `water_z_mm` in the base frame, the target (and
+    optionally a look-alike) moving per `TargetMotion`. Renders with vision/synthetic.py from the
+    camera poses the session hands it (T_base_left at each camera's own exposure time)."""
+
+    def __init__(self, params: SimParams, photo_params: PhotoModelParams, rig: Rig) -> None:
+        self.p = params
+        self.rig = rig
+        self.photo = (read_image(params.photo, "sim.photo") if params.photo
+                      else specimen(params.specimen, params.seed))
+        self.model = build_photo_model(self.photo, photo_params)
+        self.motion = TargetMotion.from_params(params)
+        self.distractor_motion = (TargetMotion.from_params(params, params.distractor_offset_mm, 35.0)
+                                  if params.distractor else None)
+        self.distractor_photo = specimen(params.specimen, params.seed + 1, other=True) if params.distractor else None
+        self.distractor_model = (build_photo_model(self.distractor_photo, photo_params)
+                                 if params.distractor else None)
+        self.water = calm_water(params.seed)
+        self.renderer = StereoRenderer(rig)
+        self.T_world_base = np.eye(4)
+        self.T_world_base[2, 3] = -params.water_z_mm  # synthetic.py's water is the plane z = 0
+        self.rng = np.random.default_rng([params.seed, 11])
+
+    def size_mm(self) -> tuple[float, float]:
+        return self.model.size_mm(self.p.alpha_px_per_mm)
+
+    def scene(self, t: float) -> Scene:
+        target = floater_from_model(self.photo, self.model, self.p.alpha_px_per_mm,
+                                    self.T_world_base @ self.motion.pose(t))
+        distractors: tuple = ()
+        if self.distractor_motion is not None:
+            distractors = (floater_from_model(self.distractor_photo, self.distractor_model,
+                                              self.p.alpha_px_per_mm,
+                                              self.T_world_base @ self.distractor_motion.pose(t)),)
+        return Scene(water=self.water, target=target, distractors=distractors)
+
+    def render(self, T_base_left: np.ndarray, t_left: float, T_base_left_at_right: np.ndarray,
+               t_right: float) -> tuple[np.ndarray, np.ndarray]:
+        """Left image exposed at t_left with the left camera at T_base_left; right image at
+        t_right with the left camera then at T_base_left_at_right (left/right skew)."""
+        r = self.renderer
+        left = render_view(self.scene(t_left), self.rig.left, self.T_world_base @ T_base_left, t_left,
+                           self.rng, CameraEffects(noise_sigma=2.0), r.rays_left)
+        T_base_right = T_base_left_at_right @ r.T_left_right
+        right = render_view(self.scene(t_right), self.rig.right, self.T_world_base @ T_base_right, t_right,
+                            self.rng, CameraEffects(noise_sigma=2.0), r.rays_right)
+        return left, right
+
+
+# ----------------------------------------------------------------------------- lockstep arm
+
+
+@dataclass(frozen=True)
+class ArmState:
+    """Joint state as the session sees it (the fields of link.JointState it uses)."""
+
+    t: float
+    q: np.ndarray
+    dq: np.ndarray
+    status: P.Status
+    fault: P.Fault
+
+
+class LockstepArm:
+    """The controller emulator's bridge (robot/emulator.py `BridgeModel`) clocked by the
+    simulation instead of a thread: every host message is encoded with the wire protocol and
+    decoded by a protocol `Decoder` — the same bytes a pty would carry — but time advances only
+    when the session calls `tick(now)`, so a lockstep run is deterministic. The session's
+    real-time mode uses the emulator on a pty and `robot.link.Link` instead; both offer the calls
+    below."""
+
+    def __init__(self, params: EmulatorParams, limits: PA10Limits, q0: np.ndarray, now: float = 0.0) -> None:
+        self.model = BridgeModel(limits, params, q0, now)
+        self.decoder = P.Decoder()
+        self.now = now
+        self._seq = 0
+        self._hist: list[ArmState] = []
+        self.nacks: list[P.Nack] = []
+        self.state_period = 1.0 / params.state_hz
+        self._t_report = -1.0
+        self._record()
+
+    def _send(self, msg) -> list:
+        self._seq = (self._seq + 1) & 0xFFFF
+        replies = []
+        for frame in self.decoder.feed(P.encode(msg, self._seq)):
+            replies += self.model.handle(frame, self.now)
+        for r in replies:
+            if isinstance(r, P.Nack):
+                self.nacks.append(r)
+        return replies
+
+    def _request(self, msg) -> None:
+        for r in self._send(msg):
+            if isinstance(r, P.Nack):
+                raise LinkError(f"bridge refused {type(msg).__name__}: error {P.Error(r.error).name}")
+
+    def enable(self) -> None:
+        self._request(P.Servo(True))
+
+    def disable(self) -> None:
+        self._request(P.Servo(False))
+
+    def stop(self) -> None:
+        self._request(P.Stop())
+
+    def tool(self, on: bool, output: int = 0) -> None:
+        self._request(P.Tool(output, on))
+
+    def send_setpoint(self, q: np.ndarray, dq: np.ndarray, t_host: float | None = None) -> int:
+        t = self.now if t_host is None else t_host
+        self._send(P.JointSetpoint(int(t * 1e6), tuple(np.asarray(q, float).tolist()),
+                                   tuple(np.asarray(dq, float).tolist())))
+        return self._seq
+
+    def tick(self, now: float) -> None:
+        """Advance the bridge by one control period ending at `now` (s)."""
+        self.now = now
+        self.model.tick(now)
+        self._record()
+
+    def _record(self) -> None:
+        m = self.model
+        self._hist.append(ArmState(self.now, m.q.copy(), m.dq.copy(), m.status(), P.Fault(m.fault)))
+        if len(self._hist) > 2000:
+            del self._hist[:1000]
+
+    def state(self) -> ArmState:
+        """The latest state (as a state report at the bridge's state rate would give it)."""
+        return self._hist[-1]
+
+    def state_at(self, t: float) -> ArmState:
+        """Joint state at simulated time t, interpolated between ticks."""
+        h = self._hist
+        if t >= h[-1].t:
+            return h[-1]
+        ts = [s.t for s in h]
+        i = int(np.searchsorted(ts, t, side="right"))
+        if i == 0:
+            raise LookupError(f"time {t:.4f} is older than the kept state history")
+        a, b = h[i - 1], h[i]
+        w = 0.0 if b.t == a.t else (t - a.t) / (b.t - a.t)
+        return ArmState(t, a.q + w * (b.q - a.q), a.dq + w * (b.dq - a.dq), a.status, a.fault)
+
+    def close(self) -> None:
+        pass
