@@ -31,8 +31,9 @@ of the plain Ruckig step:
 4. Braking check: the step is accepted only if a controlled stop started from the new setpoint
    would stay inside the joint ranges (less half the margin), above the water plane
    (`z_min_mm`) and inside the workspace box, for the elbow, wrist, flange and tool points.
-   Otherwise the arm is told to stop instead (the previous accepted setpoint had a safe stop,
-   so stopping now is safe).
+   Otherwise the arm is told to stop instead: while the arm follows the plan the step starts
+   from the last setpoint, whose stop was checked, so that stop is safe; after a re-plan from
+   an off-plan measured state, stopping is still the best there is.
 
 Every step returns what the arm will actually be told after these clamps, with `reason`
 saying which one acted ("" when none did), as LeRobot's `send_action` does.
@@ -360,7 +361,8 @@ class Motion:
 
     def stop_step(self, q_meas: np.ndarray, dq_meas: np.ndarray, reason: str = "") -> Setpoint:
         """One period of a controlled stop: velocity brought to zero with the full acceleration
-        and jerk limits, from the measured state. `done` is True once at rest."""
+        and jerk limits, each joint as fast as it can (unsynchronised), from the step's start
+        state (see the module docstring). `done` is True once at rest."""
         q_meas, dq_meas, note = self._seed(q_meas, dq_meas)
         reason = reason or note
         inp = self._current(q_meas, dq_meas)
