@@ -27,11 +27,13 @@ Rendering: every pixel of the (distorted) image is undistorted to a ray (cv2.und
 so the camera's lens distortion is honoured exactly), the ray is intersected with the water plane
 and with each floater's surface (plane, or a gently bent sheet solved by fixed-point iteration),
 and the photo is sampled there with premultiplied-alpha bilinear lookup from a photo prefiltered
-to the on-screen footprint (anti-aliased edges, no backdrop fringe).
+to the on-screen footprint (anti-aliased edges, no backdrop fringe). The per-pixel water pass
+runs as a numba kernel (synthetic_kernel.py); `_shade_water` is its numpy reference.
 """
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 
@@ -186,15 +188,28 @@ def pixel_rays(cam: Camera) -> np.ndarray:
     return np.concatenate([xy, np.ones((H, W, 1))], axis=-1)
 
 
+@functools.lru_cache(maxsize=32)
 def _texture(seed: int, size: int, cell: float) -> np.ndarray:
-    """Tileable smooth noise (float32, size x size, zero mean, unit std)."""
+    """Tileable smooth noise (float32, size x size, zero mean, unit std); memoised, read-only."""
     rng = np.random.default_rng([seed, int(cell * 10)])
     f = np.fft.fft2(rng.standard_normal((size, size)))
     k = np.fft.fftfreq(size)
     kk = np.hypot(*np.meshgrid(k, k))
     f *= np.exp(-(kk * cell) ** 2 * 4)
     t = np.real(np.fft.ifft2(f)).astype(np.float32)
-    return (t - t.mean()) / (t.std() + 1e-9)
+    t = (t - t.mean()) / (t.std() + 1e-9)
+    t.flags.writeable = False
+    return t
+
+
+@functools.lru_cache(maxsize=16)
+def _ripple_slopes(seed: int) -> tuple[np.ndarray, np.ndarray]:
+    """x and y slopes of the ripple height texture (per texel), memoised, read-only."""
+    tex = _texture(seed, 256, 3.0)
+    dx = cv2.Sobel(tex, cv2.CV_32F, 1, 0, ksize=3) / 8
+    dy = cv2.Sobel(tex, cv2.CV_32F, 0, 1, ksize=3) / 8
+    dx.flags.writeable = dy.flags.writeable = False
+    return dx, dy
 
 
 def _sample_wrapped(tex: np.ndarray, x: np.ndarray, y: np.ndarray, mm_per_texel: float) -> np.ndarray:
@@ -218,9 +233,7 @@ def _shade_water(w: Water, P: np.ndarray, d: np.ndarray, t: float) -> tuple[np.n
         gx += c * np.float32(kx)
         gy += c * np.float32(ky)
     if w.ripple > 0:
-        tex = _texture(w.seed, 256, 3.0)
-        dx = cv2.Sobel(tex, cv2.CV_32F, 1, 0, ksize=3) / 8
-        dy = cv2.Sobel(tex, cv2.CV_32F, 0, 1, ksize=3) / 8
+        dx, dy = _ripple_slopes(w.seed)
         drift = np.float32(20.0 * t)  # ripples drift with the wind (mm/s)
         gx += np.float32(w.ripple) * _sample_wrapped(dx, x + drift, y, 2.0)
         gy += np.float32(w.ripple) * _sample_wrapped(dy, x + drift, y, 2.0)
@@ -355,25 +368,37 @@ def _apply_effects(img: np.ndarray, fx: CameraEffects, rng: np.random.Generator)
 
 def render_view(scene: Scene, cam: Camera, T_world_cam: np.ndarray, t: float = 0.0,
                 rng: np.random.Generator | None = None, effects: CameraEffects | None = None,
-                rays: np.ndarray | None = None) -> np.ndarray:
+                rays: np.ndarray | None = None, compiled: bool = True) -> np.ndarray:
     """What camera `cam` at pose T_world_cam (4x4, camera -> world, mm) sees of `scene` at time
     t (s): BGR uint8 of cam.size, lens distortion included. `rng` drives the sensor noise (a
     fixed default seed when None, so renders are reproducible). `rays`: `pixel_rays(cam)`,
-    precomputed when rendering many frames of one camera (see `StereoRenderer`)."""
+    precomputed when rendering many frames of one camera (see `StereoRenderer`). `compiled`:
+    the water pass by the numba kernel (synthetic_kernel.py, ~10x faster) or by the numpy
+    reference `_shade_water` (identical model; textures sampled without OpenCV's 1/32-texel
+    weight quantisation, so the two differ by well under 1 DN on average)."""
     T = np.asarray(T_world_cam, float)
     if T.shape != (4, 4) or not np.all(np.isfinite(T)):
         raise InputError("T_world_cam: expected a finite 4x4 transform")
     rng = np.random.default_rng(0) if rng is None else rng
     R, C = T[:3, :3], T[:3, 3]
     rays = pixel_rays(cam) if rays is None else rays
-    d = (rays @ R.T).astype(np.float32)
-    d /= np.linalg.norm(d, axis=-1, keepdims=True)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        s = np.where(d[..., 2] < -1e-9, np.float32(-C[2]) / d[..., 2], np.float32(np.nan))
-    water = np.isfinite(s) & (s > 0)
-    P = C[:2].astype(np.float32) + np.where(water, s, np.float32(0))[..., None] * d[..., :2]
-    img, shade = _shade_water(scene.water, P, d, t)
-    img = np.where(water[..., None], img, np.asarray(scene.water.sky_bgr, np.float32))
+    w = scene.water
+    if compiled:
+        from photoservo.vision import synthetic_kernel as sk
+
+        dx, dy = _ripple_slopes(w.seed)
+        img, shade, P, water, d = sk.shade_water(rays, R, C, w.waves, t, w.ripple, dx, dy,
+                                                 _texture(w.seed + 1, 128, 4.0), w.mottle, w.sun_dir,
+                                                 w.colour_bgr, w.sky_bgr, w.glint)
+    else:
+        d = (rays @ R.T).astype(np.float32)
+        d /= np.linalg.norm(d, axis=-1, keepdims=True)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            s = np.where(d[..., 2] < -1e-9, np.float32(-C[2]) / d[..., 2], np.float32(np.nan))
+        water = np.isfinite(s) & (s > 0)
+        P = C[:2].astype(np.float32) + np.where(water, s, np.float32(0))[..., None] * d[..., :2]
+        img, shade = _shade_water(w, P, d, t)
+        img = np.where(water[..., None], img, np.asarray(w.sky_bgr, np.float32))
     T_cam_world = np.linalg.inv(T)
     for f in (*scene.distractors, *(() if scene.target is None else (scene.target,))):
         win = _window(cam, T_cam_world, _floater_box(f))

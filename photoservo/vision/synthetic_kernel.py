@@ -1,0 +1,116 @@
+"""Compiled (numba) water pass of the synthetic renderer: for every pixel, the view ray, its hit
+on the water plane z = 0 and the water's colour there — the same model as
+`synthetic._shade_water` (the numpy reference, which documents the shading), fused into one loop.
+
+Imported lazily by `synthetic.render_view`. Compiled code is cached on disk (`cache=True`).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+
+@njit(cache=True, inline="always")
+def _wrap_bilinear(tex: np.ndarray, fx: float, fy: float) -> float:
+    """Bilinear sample of a tileable texture at texel coordinates (fx, fy), wrapping around
+    (cv2.remap INTER_LINEAR + BORDER_WRAP, without its 1/32-texel weight quantisation)."""
+    n_r, n_c = tex.shape
+    x0 = math.floor(fx)
+    y0 = math.floor(fy)
+    wx = fx - x0
+    wy = fy - y0
+    c0 = int(x0) % n_c
+    r0 = int(y0) % n_r
+    c1 = (c0 + 1) % n_c
+    r1 = (r0 + 1) % n_r
+    top = tex[r0, c0] * (1 - wx) + tex[r0, c1] * wx
+    bot = tex[r1, c0] * (1 - wx) + tex[r1, c1] * wx
+    return top * (1 - wy) + bot * wy
+
+
+@njit(cache=True, nogil=True, error_model="numpy", fastmath={"nsz", "arcp", "contract", "afn", "reassoc"})
+def water_pass(rays, R, C, waves, omega, t, ripple, dx_tex, dy_tex, drift, mott_tex, mottle, sun,
+               colour, sky, glint, col, shade, P, water, d):
+    """Fill col (H,W,3), shade (H,W), P (H,W,2), water (H,W) and d (H,W,3, unit world rays).
+
+    rays: (H,W,3) camera-frame rays; R, C: camera-to-world rotation and centre (mm);
+    waves: (n,4) rows kx, ky, amplitude, phase; omega: (n,) angular frequencies; ripple
+    textures sampled at 2 mm/texel, mottle at 40 mm/texel (as the reference)."""
+    H, W = shade.shape
+    sx, sy, sz = sun[0], sun[1], sun[2]
+    hs = max(1e-6, math.sqrt(sx * sx + sy * sy))
+    for i in range(H):
+        for j in range(W):
+            rx, ry, rz = rays[i, j, 0], rays[i, j, 1], rays[i, j, 2]
+            dxw = R[0, 0] * rx + R[0, 1] * ry + R[0, 2] * rz
+            dyw = R[1, 0] * rx + R[1, 1] * ry + R[1, 2] * rz
+            dzw = R[2, 0] * rx + R[2, 1] * ry + R[2, 2] * rz
+            inv = 1.0 / math.sqrt(dxw * dxw + dyw * dyw + dzw * dzw)
+            dxw *= inv
+            dyw *= inv
+            dzw *= inv
+            d[i, j, 0] = dxw
+            d[i, j, 1] = dyw
+            d[i, j, 2] = dzw
+            hit = dzw < -1e-9 and -C[2] / dzw > 0
+            water[i, j] = hit
+            s = -C[2] / dzw if hit else 0.0
+            x = C[0] + s * dxw
+            y = C[1] + s * dyw
+            P[i, j, 0] = x
+            P[i, j, 1] = y
+            if not hit:
+                for k in range(3):
+                    col[i, j, k] = sky[k]
+                shade[i, j] = 1.0
+                continue
+            gx = 0.0
+            gy = 0.0
+            for w in range(waves.shape[0]):
+                # phase in double (|phase| reaches thousands of rad), cosine in single precision
+                ph = (waves[w, 0] * x + waves[w, 1] * y + waves[w, 3] - omega[w] * t) % (2 * math.pi)
+                c = waves[w, 2] * math.cos(np.float32(ph))
+                gx += c * waves[w, 0]
+                gy += c * waves[w, 1]
+            if ripple > 0:
+                gx += ripple * _wrap_bilinear(dx_tex, (x + drift) / 2.0, y / 2.0)
+                gy += ripple * _wrap_bilinear(dy_tex, (x + drift) / 2.0, y / 2.0)
+            inv_len = 1.0 / math.sqrt(gx * gx + gy * gy + 1.0)
+            dn = (-dxw * gx - dyw * gy + dzw) * inv_len
+            cos_v = min(max(-dn, 0.0), 1.0)
+            fres = 0.02 + 0.98 * (1 - cos_v) ** 5
+            sh = min(max(1.0 + 2.5 / hs * (gx * sx + gy * sy), 0.6), 1.4)
+            shade[i, j] = sh
+            mott = 1 + mottle * _wrap_bilinear(mott_tex, x / 40.0, y / 40.0)
+            kb = sh * mott * (1 - fres)
+            spec = 0.0
+            if glint > 0:
+                ns = (-gx * sx - gy * sy + sz) * inv_len
+                ds = dxw * sx + dyw * sy + dzw * sz
+                rs = ds - 2 * dn * ns
+                if rs > 0.98:  # below, rs**600 < 6e-6: no glint
+                    spec = glint * 900 * math.exp(600 * math.log(min(rs, 1.0)))
+            for k in range(3):
+                col[i, j, k] = colour[k] * kb + sky[k] * fres + spec
+
+
+def shade_water(rays: np.ndarray, R: np.ndarray, C: np.ndarray, waves: np.ndarray, t: float, ripple: float,
+                dx_tex: np.ndarray, dy_tex: np.ndarray, mott_tex: np.ndarray, mottle: float, sun, colour, sky,
+                glint: float):
+    """Run `water_pass` on fresh arrays: (col, shade, P, water, d)."""
+    H, W = rays.shape[:2]
+    col = np.empty((H, W, 3), np.float32)
+    shade = np.empty((H, W), np.float32)
+    P = np.empty((H, W, 2), np.float32)
+    water = np.empty((H, W), np.bool_)
+    d = np.empty((H, W, 3), np.float32)
+    waves = np.ascontiguousarray(waves, np.float64).reshape(-1, 4)
+    omega = np.sqrt(9810.0 * np.hypot(waves[:, 0], waves[:, 1]))
+    water_pass(np.ascontiguousarray(rays, np.float64), np.ascontiguousarray(R, np.float64),
+               np.ascontiguousarray(C, np.float64), waves, omega, float(t), float(ripple),
+               dx_tex, dy_tex, 20.0 * float(t), mott_tex, float(mottle), np.asarray(sun, np.float64),
+               np.asarray(colour, np.float64), np.asarray(sky, np.float64), float(glint), col, shade, P, water, d)
+    return col, shade, P, water, d
