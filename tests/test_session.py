@@ -1,0 +1,113 @@
+"""The tracking session (issue 5): controller safety, the lockstep arm behind the wire protocol,
+and the closed-loop acceptance runs on the simulator's clock."""
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from photoservo.robot import pa10
+from photoservo.robot import protocol as P
+from photoservo.servo.cli import main
+from photoservo.servo.config import load_config
+from photoservo.servo.motion import Motion
+from photoservo.servo.session import Controller, left_centre
+from photoservo.servo.world import LockstepArm, TargetMotion, sim_hand_eye
+from photoservo.vision.synthetic import synthetic_rig
+from photoservo.vision.tracker import Track
+
+EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
+
+
+def _track(t, T, v=(0.0, 0.0, 0.0)):
+    return Track(t=t, status="tracking", found=True, fitness=0.9, T_base_model=T,
+                 velocity_mm_s=np.asarray(v, float), alpha=2.0, size_mm=(130.0, 42.0), R_left=None,
+                 t_left=None, alpha_measured=2.0, generations=8, seconds=0.01)
+
+
+@pytest.fixture(scope="module")
+def cfg():
+    return load_config()
+
+
+def _controller(cfg, collect=False):
+    rig = synthetic_rig()
+    R, t = sim_hand_eye(rig)
+    T_fl = np.eye(4)
+    T_fl[:3, :3], T_fl[:3, 3] = R, t
+    return Controller(cfg.servo, Motion(cfg.motion, pa10.load_limits()), T_fl, left_centre(rig), collect=collect)
+
+
+def test_controller_stops_without_target_or_with_stale_estimate(cfg):
+    ctrl = _controller(cfg)
+    q, dq = pa10.HOME_Q.copy(), np.full(7, 0.05)
+    info = ctrl.step(0.0, q, dq, None)
+    assert info.stop_reason == "no target" and info.T_base_cam_des is None
+    T = np.eye(4)
+    T[:3, :3] = np.diag([1.0, -1.0, -1.0])
+    T[:3, 3] = [700.0, 0.0, -100.0]
+    info = ctrl.step(1.0, q, dq, _track(1.0 - 2 * cfg.servo.max_estimate_age_s, T))
+    assert "old" in info.stop_reason
+    # a stop decelerates: the commanded speed is below the measured one
+    assert np.linalg.norm(info.setpoint.dq) < np.linalg.norm(dq)
+    info = ctrl.step(1.0, q, np.zeros(7), _track(1.0, T))
+    assert info.stop_reason == "" and info.T_base_cam_des is not None
+
+
+def test_controller_refuses_target_out_of_reach(cfg):
+    ctrl = _controller(cfg)
+    T = np.eye(4)
+    T[:3, 3] = [2500.0, 0.0, -100.0]
+    info = ctrl.step(0.0, pa10.HOME_Q, np.zeros(7), _track(0.0, T))
+    assert info.stop_reason == "target out of reach"
+
+
+def test_target_motion_is_face_up_drifting_and_heaving():
+    cfg = load_config()
+    m = TargetMotion.from_params(cfg.sim)
+    T0, T1 = m.pose(0.0), m.pose(1.0)
+    assert T0[2, 2] < -0.99  # model z points down into the water at rest (no roll/pitch at t=0 up to pitch phase)
+    d = T1[:3, 3] - T0[:3, 3]
+    assert d[:2] == pytest.approx(cfg.sim.drift_mm_s, abs=1e-9)
+    zs = [m.pose(t)[2, 3] - cfg.sim.water_z_mm for t in np.linspace(0, 4, 81)]
+    assert max(zs) == pytest.approx(cfg.sim.heave_mm, rel=0.01) and min(zs) == pytest.approx(-cfg.sim.heave_mm, rel=0.01)
+    h = (m.pose(0.3)[:3, 3] - m.pose(0.29)[:3, 3]) / 0.01
+    assert h == pytest.approx(m.velocity(0.295), abs=0.5)
+
+
+def test_lockstep_arm_speaks_the_wire_protocol(cfg):
+    arm = LockstepArm(cfg.emulator, pa10.load_limits(), pa10.HOME_Q)
+    q = pa10.HOME_Q.copy()
+    arm.send_setpoint(q + 0.001, np.zeros(7), 0.0)  # before enable: refused by the bridge
+    assert arm.nacks and arm.nacks[-1].error == P.Error.SERVO_OFF
+    arm.enable()
+    dt = 1.0 / cfg.emulator.control_hz
+    target = q.copy()
+    for i in range(50):
+        target[0] += 0.1 * dt  # 0.1 rad/s on S1
+        arm.send_setpoint(target, np.r_[0.1, np.zeros(6)], i * dt)
+        arm.tick((i + 1) * dt)
+    assert arm.state().q[0] == pytest.approx(target[0], abs=2e-3)
+    bad = q.copy()
+    bad[1] = math.radians(120)  # S2 range is +-91 deg
+    n = len(arm.nacks)
+    arm.send_setpoint(bad, np.zeros(7), 0.3)
+    assert len(arm.nacks) == n + 1
+    mid = arm.state_at(25.5 * dt)
+    assert arm.state_at(25 * dt).q[0] < mid.q[0] < arm.state_at(26 * dt).q[0]
+
+
+def test_track_refuses_rig_without_hand_eye(tmp_path, capsys):
+    from photoservo.vision.rig import default_rig, save_rig
+
+    save_rig(default_rig(), tmp_path / "rig.toml")
+    rc = main(["track", "--rig", str(tmp_path / "rig.toml"), "--photo", str(EXAMPLES / "photos" / "squid.png"),
+               "--port", "/dev/null-nope", "--no-record"])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert rc == 2 and len(err) == 1 and "hand_eye" in err[0]
+
+
+def test_track_rejects_bad_duration(capsys):
+    assert main(["track", "--sim", "--duration", "-1", "--no-record"]) == 2
+    assert "--duration" in capsys.readouterr().err
