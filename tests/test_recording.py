@@ -317,6 +317,11 @@ def test_bad_inputs_are_one_line_errors(tmp_path: Path):
         Recorder.open(tmp_path / "x.mp4", "track")
     with pytest.raises(InputError, match="recording not found"):
         read_recording(tmp_path / "missing.rrd")
+    seg = tmp_path / "again.rrd"
+    with Recorder.open(seg, "track", segment_s=1.0) as rec:
+        rec.log_frame(0, 0.0, *frame_pair(0))
+    with pytest.raises(InputError, match="exists already"):
+        Recorder.open(seg, "track", segment_s=1.0)
     assert default_path("move", tmp_path).parent == tmp_path
     assert default_path("move").name.endswith("_move.rrd")
 

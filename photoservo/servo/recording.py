@@ -87,6 +87,7 @@ the same recording id, so the viewer opens them together as one recording, and
 from __future__ import annotations
 
 import dataclasses
+import glob
 import importlib
 import io
 import json
@@ -391,6 +392,11 @@ class Recorder:
             p.parent.mkdir(parents=True, exist_ok=True)
         except OSError as e:
             raise InputError(f"{p.parent}: cannot create the recording folder ({e.strerror})") from None
+        if segment_s > 0:   # a reader would mix old and new files of the same name
+            old = sorted(p.parent.glob(f"{glob.escape(p.stem)}.seg*.rrd")) + ([p] if p.exists() else [])
+            if old:
+                raise InputError(f"{old[0]}: a recording named {p.name} exists already; "
+                                 "choose another path or remove it")
         return cls(p, verb, mode, segment_s, view, connect_url, encode_threads)
 
     @classmethod

@@ -19,6 +19,7 @@ simulator's ground truth, position / heading / tilt / size error. Definitions at
 from __future__ import annotations
 
 import dataclasses
+import glob
 import io
 import json
 import math
@@ -167,15 +168,11 @@ def recording_files(path: str | Path) -> list[Path]:
     base = p.with_name(m["stem"] + p.suffix) if m else p
     if p.is_file() and not m:
         return [p]
-    found = [(int(mm["n"]), s) for s in base.parent.glob(f"{glob_escape(base.stem)}.seg*{base.suffix}")
+    found = [(int(mm["n"]), s) for s in base.parent.glob(f"{glob.escape(base.stem)}.seg*{base.suffix}")
              if (mm := _SEG.match(s.stem)) and mm["stem"] == base.stem]
     if not found:
         raise InputError(f"{p}: recording not found (no such file, no {base.stem}.seg*.rrd)")
     return [s for _, s in sorted(found)]
-
-
-def glob_escape(s: str) -> str:
-    return re.sub(r"([*?\[])", r"[\1]", s)
 
 
 def _open(path: Path) -> tuple[RrdReader, bool]:
