@@ -32,6 +32,7 @@ from photoservo.servo.replay_io import (
     recording_files,
     run_metrics,
 )
+from photoservo.vision.estimator import Estimate
 from photoservo.vision.photo_model import PhotoModel
 from photoservo.vision.rig import default_rig, dump_rig, parse_rig
 
@@ -100,6 +101,9 @@ def test_estimates_arm_timings_events_read_back(tmp_path: Path):
     R = np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])
     with Recorder.open(path, "track") as rec:
         rec.log_estimate(0, 0.0, found=False, fitness=0.125)
+        rec.log_estimate_of(2, 0.1, Estimate(found=False, position_mm=None, rotation=None,
+                                             alpha_px_per_mm=None, size_mm=None, fitness=None,
+                                             generations=4, seconds=0.01, confidence=0.0))
         rec.log_estimate(1, 0.05, found=True, fitness=0.875, R=R, position_mm=[1.0, 2.0, 503.25],
                          alpha=2.5, size_mm=(40.0, 20.0), generations=7)
         for i in range(3):
@@ -107,7 +111,8 @@ def test_estimates_arm_timings_events_read_back(tmp_path: Path):
         rec.log_timings(0.05, {"capture": 1.5, "ga": 20.25})
         rec.event(0.05, "target found")
     r = read_recording(path)
-    e0, e1 = r.estimates
+    e0, e1, e2 = r.estimates
+    assert (e2.frame, e2.found, e2.fitness, e2.generations, e2.position_mm) == (2, False, None, 4, None)
     assert (e0.frame, e0.found, e0.fitness, e0.rotation) == (0, False, 0.125, None)
     assert (e1.found, e1.fitness, e1.alpha, e1.generations) == (True, 0.875, 2.5, 7)
     assert np.array_equal(e1.rotation, R) and np.array_equal(e1.position_mm, [1.0, 2.0, 503.25])
@@ -386,8 +391,10 @@ def test_projected_points_and_desired_pose_are_drawn(tmp_path: Path):
     with Recorder.open(path, "track") as rec:
         rec.log_static_setup(dump_rig(rig), frame_pair(0)[0], model, CONFIG_TOML, seed=1)
         rec.log_frame(0, 0.0, *frame_pair(0))
-        rec.log_estimate(0, 0.0, found=True, fitness=0.7, R=R, position_mm=p, alpha=alpha,
-                         size_mm=model.size_mm(alpha), projection=proj)
+        est = Estimate(found=True, position_mm=p, rotation=R, alpha_px_per_mm=alpha,
+                       size_mm=model.size_mm(alpha), fitness=0.7, generations=9, seconds=0.02,
+                       confidence=0.9)
+        rec.log_estimate_of(0, 0.0, est, projection=proj)
         rec.log_desired(0.0, np.eye(4), frame=0)
     assert verify_rrd(path)[0]
     pts, ids = {}, {}
@@ -402,6 +409,9 @@ def test_projected_points_and_desired_pose_are_drawn(tmp_path: Path):
     assert np.allclose(left[:n_in], proj.inner_left[0], atol=1e-3)             # float32
     assert np.allclose(left[n_in:], proj.outer_left[0], atol=1e-3)
     assert (right == 0).sum() == n_in and (right == 1).sum() == len(model.outer_uv)
+    e = read_recording(path).estimates[0]
+    assert (e.found, e.fitness, e.alpha, e.generations) == (True, 0.7, alpha, 9)
+    assert np.array_equal(e.size_mm, model.size_mm(alpha))
 
 
 def test_recording_config_section(tmp_path: Path):

@@ -649,7 +649,18 @@ class Recorder:
                 self._encode_and_log(frame, t, side, np.asarray(img))
         self.frames_logged += 1
 
-    def log_estimate(self, frame: int, t: float, *, found: bool, fitness: float,
+    def log_estimate_of(self, frame: int, t: float, estimate: Any, *,
+                        T_base_left: np.ndarray | None = None, projection: Any = None) -> None:
+        """`log_estimate` from a `vision.estimator.Estimate` (or anything with the DESIGN.md
+        estimate fields: found, position_mm, rotation, alpha_px_per_mm, size_mm, fitness,
+        generations)."""
+        e = estimate
+        self.log_estimate(frame, t, found=bool(e.found), fitness=e.fitness, R=e.rotation,
+                          position_mm=e.position_mm, alpha=e.alpha_px_per_mm, size_mm=e.size_mm,
+                          generations=int(e.generations), T_base_left=T_base_left,
+                          projection=projection)
+
+    def log_estimate(self, frame: int, t: float, *, found: bool, fitness: float | None,
                      R: np.ndarray | None = None, position_mm: np.ndarray | None = None,
                      alpha: float | None = None, size_mm: tuple[float, float] | None = None,
                      generations: int = 0, T_base_left: np.ndarray | None = None,
@@ -662,7 +673,8 @@ class Recorder:
         T_base_left places the model in the base frame for the 3-D view and truth errors."""
         self._check()
         self._last_t = t
-        self._queue_scalar("plots/fitness", t, frame, float(fitness))
+        if fitness is not None:
+            self._queue_scalar("plots/fitness", t, frame, float(fitness))
         self._queue_scalar("plots/found", t, frame, 1.0 if found else 0.0)
         posed = found and R is not None and position_mm is not None
         if posed:

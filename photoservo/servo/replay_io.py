@@ -109,7 +109,7 @@ class EstimateRecord:
     frame: int
     t: float
     found: bool
-    fitness: float
+    fitness: float | None
     generations: int = 0
     rotation: np.ndarray | None = None      # (3, 3)
     position_mm: np.ndarray | None = None   # (3,)
@@ -395,7 +395,8 @@ def read_recording(path: str | Path, *, images: bool = False) -> Recording:
                 rot, T, a = v["rotation"], v["T_base_left"], v["alpha"]
                 estimates[int(frame[i])] = EstimateRecord(
                     frame=int(frame[i]), t=float(t[i]), found=bool(v["found"][0]),
-                    fitness=float(v["fitness"][0]), generations=int(v["generations"][0]),
+                    fitness=None if v["fitness"] is None else float(v["fitness"][0]),
+                    generations=int(v["generations"][0]),
                     rotation=None if rot is None else rot.reshape(3, 3),
                     position_mm=v["position_mm"], alpha=None if a is None else float(a[0]),
                     size_mm=v["size_mm"], T_base_left=None if T is None else T.reshape(4, 4))
@@ -453,7 +454,7 @@ def run_metrics(rec: Recording) -> dict[str, float]:
     """Per-run numbers of the comparison table (NaN when a run lacks the data):
 
     frames            frames logged
-    mean_fitness      mean fitness over all estimates
+    mean_fitness      mean fitness over all estimates that have one
     found_ratio       estimates with found / estimates
     lost_frames       estimates with found = false
     jitter_mm         RMS of the second difference |p[k+1] - 2 p[k] + p[k-1]| of the estimated
@@ -470,7 +471,8 @@ def run_metrics(rec: Recording) -> dict[str, float]:
     est = rec.estimates
     found = [e for e in est if e.found and e.T_base_model() is not None]
     m: dict[str, float] = {"frames": float(len(rec.frames))}
-    m["mean_fitness"] = float(np.mean([e.fitness for e in est])) if est else nan
+    fits = [e.fitness for e in est if e.fitness is not None]
+    m["mean_fitness"] = float(np.mean(fits)) if fits else nan
     m["found_ratio"] = len([e for e in est if e.found]) / len(est) if est else nan
     m["lost_frames"] = float(len([e for e in est if not e.found])) if est else nan
     d2 = []
