@@ -146,6 +146,11 @@ class Motion:
     """Online jerk-limited motion at the control rate: position moves, velocity following and a
     controlled stop, each step from the measured joint state, with the safety layer above.
 
+    `params` is the [motion] config, `limits` the arm's (configs/pa10.toml, `load_limits()`);
+    `T_flange_tool` (4x4, mm), when given, replaces [motion] tool_offset_mm as the tool point
+    that the keep-out and the tool-speed cap apply to. Use one Motion per arm and call one of
+    the three steps once per control period with the latest state.
+
     >>> from photoservo.robot.pa10 import HOME_Q, load_limits
     >>> from photoservo.servo.config import load_config
     >>> m = Motion(load_config().motion, load_limits())
