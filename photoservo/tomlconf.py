@@ -9,7 +9,6 @@ import dataclasses
 import tomllib
 import types
 import typing
-from importlib import resources
 from pathlib import Path
 from typing import Any
 
@@ -19,10 +18,11 @@ from photoservo.errors import InputError
 def configs_dir() -> Path:
     """Folder holding the shipped TOML files (default.toml, pa10.toml, example rigs...): the
     checkout's `configs/` when running from a source tree, else the installed package data."""
-    here = Path(__file__).resolve().parents[1] / "configs"
-    if (here / "default.toml").is_file():
-        return here
-    return Path(str(resources.files("photoservo.configs")))
+    pkg = Path(__file__).resolve().parent
+    checkout = pkg.parent / "configs"
+    if (checkout / "default.toml").is_file():
+        return checkout
+    return pkg / "configs"  # where the wheel puts them (pyproject maps configs/ -> photoservo.configs)
 
 
 def read_toml(path: Path) -> dict:
