@@ -23,7 +23,7 @@ import numpy as np
 from photoservo.errors import InputError
 from photoservo.fileio import read_image, write_image_atomic
 from photoservo.servo.cmd_config import add_config_options
-from photoservo.servo.config import load_config
+from photoservo.servo.config import Config, load_config
 from photoservo.vision.estimator import Estimate, estimate
 from photoservo.vision.fitness import project_model
 from photoservo.vision.photo_model import PhotoModel, load_photo_model, parse_roi
@@ -31,21 +31,18 @@ from photoservo.vision.pose import heading_tilt_from_rotation
 from photoservo.vision.rig import Rig, load_rig
 
 
-def add_arguments(p: argparse.ArgumentParser) -> None:
+def add_stereo_inputs(p: argparse.ArgumentParser) -> None:
+    """--rig, --photo, --roi, --left, --right: one photo and one stereo frame (estimate, scan)."""
     p.add_argument("--rig", required=True, metavar="RIG.toml", help="calibrated stereo rig (DESIGN.md format)")
     p.add_argument("--photo", required=True, metavar="PHOTO", help="one photo of the kind of creature sought")
     p.add_argument("--roi", metavar="X,Y,W,H", help="region of the photo holding the creature (px), for cluttered photos")
     p.add_argument("--left", required=True, metavar="L.png", help="left camera image")
     p.add_argument("--right", required=True, metavar="R.png", help="right camera image")
-    add_config_options(p)
-    p.add_argument("--seed", type=int, default=0, help="random seed of the GA (default 0)")
-    p.add_argument("--json", action="store_true", help="print only the estimate JSON object")
-    p.add_argument("--all", action="store_true", help="also list every candidate (key 'candidates' with --json)")
-    p.add_argument("--preview", metavar="OUT.png", help="write both images with the estimated model drawn on them")
 
 
-def run(args: argparse.Namespace) -> int:
-    cfg = load_config(args.config, args.overrides)
+def load_stereo_inputs(args: argparse.Namespace, cfg: Config) -> tuple[Rig, PhotoModel, np.ndarray, np.ndarray]:
+    """(rig, photo-model, left BGR, right BGR) from the `add_stereo_inputs` options; InputError
+    naming the file when one is unreadable or an image's size is not the rig's."""
     rig = load_rig(args.rig)
     roi = parse_roi(args.roi) if args.roi else None
     model = load_photo_model(args.photo, cfg.photo_model, roi)
@@ -55,6 +52,21 @@ def run(args: argparse.Namespace) -> int:
         if (img.shape[1], img.shape[0]) != tuple(cam.size):
             raise InputError(f"{getattr(args, name)}: image is {img.shape[1]}x{img.shape[0]} px but the rig's "
                              f"[{name}] size is {cam.size[0]}x{cam.size[1]}")
+    return rig, model, left, right
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    add_stereo_inputs(p)
+    add_config_options(p)
+    p.add_argument("--seed", type=int, default=0, help="random seed of the GA (default 0)")
+    p.add_argument("--json", action="store_true", help="print only the estimate JSON object")
+    p.add_argument("--all", action="store_true", help="also list every candidate (key 'candidates' with --json)")
+    p.add_argument("--preview", metavar="OUT.png", help="write both images with the estimated model drawn on them")
+
+
+def run(args: argparse.Namespace) -> int:
+    cfg = load_config(args.config, args.overrides)
+    rig, model, left, right = load_stereo_inputs(args, cfg)
     est = estimate(model, left, right, rig, cfg.ga, cfg.estimator, cfg.fitness, seed=args.seed)
     if args.preview:
         write_image_atomic(args.preview, draw_estimate(left, right, model, rig, est))

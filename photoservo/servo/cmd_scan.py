@@ -20,21 +20,16 @@ import time
 from pathlib import Path
 
 from photoservo.errors import InputError
-from photoservo.fileio import read_image, write_image_atomic, write_text_atomic
+from photoservo.fileio import write_image_atomic, write_text_atomic
 from photoservo.servo.cmd_config import add_config_options
+from photoservo.servo.cmd_estimate import add_stereo_inputs, load_stereo_inputs
 from photoservo.servo.config import load_config
 from photoservo.vision.fitness import stereo_hue
-from photoservo.vision.photo_model import load_photo_model, parse_roi
-from photoservo.vision.rig import load_rig
 from photoservo.vision.scan import AXES, draw_slice, load_pose, scan_slice
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--rig", required=True, metavar="RIG.toml", help="stereo rig calibration")
-    p.add_argument("--photo", required=True, metavar="PHOTO", help="photo of the kind of creature")
-    p.add_argument("--roi", metavar="X,Y,W,H", help="cluttered photo: GrabCut inside this rectangle (px)")
-    p.add_argument("--left", required=True, metavar="L.png", help="left camera image")
-    p.add_argument("--right", required=True, metavar="R.png", help="right camera image")
+    add_stereo_inputs(p)
     p.add_argument("--pose", required=True, metavar="POSE.json", help="estimate or ground-truth JSON to scan around")
     p.add_argument("--out", required=True, metavar="DIR", help="folder for scan_<axis>.png and scan.json")
     p.add_argument("--axes", default="x,y,z,rx,ry,rz", help="comma-separated axes among " + ",".join(AXES))
@@ -79,13 +74,7 @@ def run(args: argparse.Namespace) -> int:
     if not args.alpha_factor > 1:
         raise InputError(f"--alpha-factor {args.alpha_factor}: must be > 1")
     cfg = load_config(args.config, args.overrides)
-    rig = load_rig(args.rig)
-    model = load_photo_model(args.photo, cfg.photo_model, parse_roi(args.roi) if args.roi else None)
-    left, right = read_image(args.left, "left image"), read_image(args.right, "right image")
-    for name, img, cam in (("--left", left, rig.left), ("--right", right, rig.right)):
-        if (img.shape[1], img.shape[0]) != cam.size:
-            raise InputError(f"{name} {getattr(args, name[2:])}: image is {img.shape[1]}x{img.shape[0]}, "
-                             f"the rig says {cam.size[0]}x{cam.size[1]}")
+    rig, model, left, right = load_stereo_inputs(args, cfg)
     R0, t0, alpha0 = load_pose(args.pose)
     frame = stereo_hue(left, right, cfg.fitness)
 
