@@ -154,7 +154,7 @@ def calibrate_stereo(views: Sequence[StereoView], board: Board, size_left: tuple
         rms.append(float(out[0]))
         cams.append((out[1], out[2].ravel()[:5]))
     (K1, d1), (K2, d2) = cams
-    crit = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 200, 1e-9)
+    crit = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 100, 1e-7)  # 200 / 1e-9: 3x slower, same result
     fixed = cv2.stereoCalibrateExtended(obj, img_l, img_r, K1, d1, K2, d2, size_left, None, None,
                                         flags=cv2.CALIB_FIX_INTRINSIC, criteria=crit)
     joint = cv2.stereoCalibrateExtended(obj, img_l, img_r, K1.copy(), d1.copy(), K2.copy(), d2.copy(),
