@@ -134,6 +134,9 @@ def sim_hand_eye(rig: Rig, standoff_mm: float = 100.0) -> tuple[np.ndarray, np.n
     return np.eye(3), np.array([0.0, 0.0, standoff_mm]) - centre_in_left
 
 
+SIM_WATER_STRIDE = 4  # render_view's fast path: water shaded per 4x4 block, target at full resolution
+
+
 class SimScene:
     """What the simulated cameras see: water at `water_z_mm` in the base frame, the target (and
     optionally a look-alike) moving per `TargetMotion`. Renders with vision/synthetic.py from the
@@ -175,11 +178,14 @@ class SimScene:
         """Left image exposed at t_left with the left camera at T_base_left; right image at
         t_right with the left camera then at T_base_left_at_right (left/right skew)."""
         r = self.renderer
+        water_left, water_right = r.water_rays(SIM_WATER_STRIDE)
         left = render_view(self.scene(t_left), self.rig.left, self.T_world_base @ T_base_left, t_left,
-                           self.rng, CameraEffects(noise_sigma=2.0), r.rays_left)
+                           self.rng, CameraEffects(noise_sigma=2.0), r.rays_left,
+                           water_stride=SIM_WATER_STRIDE, water_rays=water_left)
         T_base_right = T_base_left_at_right @ r.T_left_right
         right = render_view(self.scene(t_right), self.rig.right, self.T_world_base @ T_base_right, t_right,
-                            self.rng, CameraEffects(noise_sigma=2.0), r.rays_right)
+                            self.rng, CameraEffects(noise_sigma=2.0), r.rays_right,
+                            water_stride=SIM_WATER_STRIDE, water_rays=water_right)
         return left, right
 
 
