@@ -297,7 +297,9 @@ def dls_step(q, twist, damping: float = 0.05, *, T_flange_tool: np.ndarray | Non
     JJt = J @ J.T + (damping * damping) * np.eye(6)
     dq = J.T @ np.linalg.solve(JJt, e)
     if k_null:
-        N = np.eye(N_JOINTS) - np.linalg.pinv(J, rcond=1e-6) @ J
+        # I - J^+ J as I - J^T (J J^T + eps I)^-1 J: the same projector for a full-rank J, bounded
+        # near a singularity, and a 6x6 solve instead of an SVD
+        N = np.eye(N_JOINTS) - J.T @ np.linalg.solve(J @ J.T + 1e-10 * np.eye(6), J)
         z = k_null * (np.asarray(q_home, dtype=float) - q)
         if free is not None:
             z[~np.asarray(free, dtype=bool)] = 0.0
