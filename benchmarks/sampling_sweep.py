@@ -13,10 +13,13 @@ seeded synthetic scenes are estimated from the default search volume and we repo
 
 Scenes: vision/synthetic.random_scene, squid / crab / fish in turn, 300-1500 mm, random heading
 and tilt up to 40 deg, effects waves, glints, noise, blur, white balance, chroma loss and bend;
-odd scenes give the estimator another individual's photo. Rule for the default: the fastest
-interval (median wall time) whose success rate is within 5 points of the best and whose median
-position, size, heading and tilt errors are each within 1.25x of the best (or the best plus a
-small absolute slack, SLACK); the table marks it.
+odd scenes give the estimator another individual's photo. Every interval sees the same scenes,
+so accuracy is compared in pairs against the finest interval: per scene, this interval's error
+minus the finest's; the median of those differences must stay within SLACK for position, size,
+heading and tilt, and the success rate within one scene (or 5 points). Among those intervals
+the default is the one with the cheapest fitness per generation (the part of the time the
+interval changes; the estimate's wall time on this shared machine is dominated by GA overhead
+and load noise). The table marks it.
 
 Prints a table and writes benchmarks/out/sampling_sweep.json.
 Run: /work/venv/bin/python benchmarks/sampling_sweep.py [--scenes 18] [--intervals 2,3,4,6,8,12]
@@ -44,7 +47,9 @@ from photoservo.vision.synthetic import random_scene
 KINDS = ("squid", "crab", "fish")
 EFFECTS = ("waves", "glints", "noise", "blur", "white-balance", "chroma", "bend")
 SUCCESS_POS_FRAC = 0.05
-# A median error is "close to the best" within 1.25x the best or the best plus this slack.
+# An interval is "as accurate as the finest" when the median over scenes of its error minus the
+# finest interval's error on the same scene is at most this (position and size in % of the
+# distance / size, heading and tilt in degrees; tilt is weakly observable, hence the wider slack).
 SLACK = {"pos_pct": 0.25, "size_pct": 0.5, "heading_deg": 0.5, "tilt_deg": 2.0}
 
 
@@ -78,6 +83,7 @@ def errors(truth: dict, est) -> dict:
 
 
 def med(rows: list[dict], key: str) -> float | None:
+    """Median of `key` over the rows that have it (not-found scenes have no errors)."""
     vals = [r[key] for r in rows if key in r]
     return float(np.median(vals)) if vals else None
 
@@ -121,19 +127,27 @@ def main() -> None:
               flush=True)
     load_after = os.getloadavg()
 
-    best_success = max(e["success_rate"] for e in table)
-    best = {k: min(e[k] for e in table if e[k] is not None) for k in SLACK}
-
-    def close_to_best(e: dict) -> bool:
-        return e["success_rate"] >= best_success - 0.05 and all(
-            e[k] is not None and e[k] <= max(1.25 * best[k], best[k] + slack) for k, slack in SLACK.items())
-
-    pick = min([e for e in table if close_to_best(e)] or table, key=lambda e: e["seconds"])
-
+    # Paired comparison against the finest interval (the most points: the reference accuracy).
+    # The same scenes are estimated at every interval, so per-scene differences remove the
+    # scene-to-scene spread that dominates the medians.
+    ref = min(table, key=lambda e: e["interval_px"])
+    success_tol = max(0.05, 1.0 / args.scenes)  # at least one scene of slack
+    for e in table:
+        e["paired_median_diff"] = {}
+        for k in SLACK:
+            d = [a[k] - b[k] for a, b in zip(e["scenes"], ref["scenes"]) if k in a and k in b]
+            e["paired_median_diff"][k] = float(np.median(d)) if d else None
+        e["close_to_finest"] = e["success_rate"] >= ref["success_rate"] - success_tol - 1e-9 and all(
+            v is not None and v <= SLACK[k] for k, v in e["paired_median_diff"].items())
+    close = [e for e in table if e["close_to_finest"]]
+    # time criterion: the fitness cost per generation (what the interval changes; the estimate's
+    # wall time on this shared machine is dominated by GA overhead and load noise)
+    pick = min(close, key=lambda e: e["fitness_ms_per_generation"])
     print(f"\nsampling sweep: {args.scenes} scenes per interval, load average {load_before[0]:.2f} -> "
           f"{load_after[0]:.2f} on {os.cpu_count()} CPUs (shared machine)")
     hdr = (f"{'interval':>8}{'points':>8}{'fit ms/gen':>11}{'success':>9}{'pos %':>7}{'depth %':>8}"
-           f"{'heading':>8}{'tilt':>6}{'size %':>7}{'gens':>6}{'wall s':>8}")
+           f"{'heading':>8}{'tilt':>6}{'size %':>7}{'gens':>6}{'wall s':>8}   paired vs finest: "
+           f"{'dpos %':>7}{'dhead':>7}{'dtilt':>7}{'dsize %':>8}")
     print(hdr)
     print("-" * len(hdr))
 
@@ -141,18 +155,24 @@ def main() -> None:
         return format(v, fmt) if v is not None else "-"
 
     for e in table:
-        mark = "  <- pick" if e is pick else ""
+        mark = "  <- pick" if e is pick else "  close" if e in close else ""
+        pd = e["paired_median_diff"]
         print(f"{e['interval_px']:>8g}{f(e['points'], '8.0f')}{e['fitness_ms_per_generation']:>11.3f}"
               f"{e['success_rate']:>9.0%}{f(e['pos_pct'], '7.2f')}{f(e['depth_pct'], '8.2f')}"
               f"{f(e['heading_deg'], '8.2f')}{f(e['tilt_deg'], '6.1f')}{f(e['size_pct'], '7.2f')}"
-              f"{f(e['generations'], '6.0f')}{f(e['seconds'], '8.2f')}{mark}")
-    print(f"pick: interval {pick['interval_px']:g} px — the fastest whose success rate is within 5 points "
-          f"of the best ({best_success:.0%}) and whose median position, size, heading and tilt errors are "
-          f"within 1.25x (or {SLACK}) of the best; configured default: {cfg.photo_model.interval_px:g} px")
+              f"{f(e['generations'], '6.0f')}{f(e['seconds'], '8.2f')}   {'':18}"
+              f"{f(pd['pos_pct'], '+7.2f')}{f(pd['heading_deg'], '+7.2f')}{f(pd['tilt_deg'], '+7.1f')}"
+              f"{f(pd['size_pct'], '+8.2f')}{mark}")
+    print(f"pick: interval {pick['interval_px']:g} px — the cheapest fitness per generation among the "
+          f"intervals whose success rate is within {success_tol:.0%} of the finest ({ref['interval_px']:g} px, "
+          f"{ref['success_rate']:.0%}) and whose paired median errors exceed the finest's by at most "
+          f"{SLACK}; configured default: {cfg.photo_model.interval_px:g} px")
     out = Path(__file__).parent / "out" / "sampling_sweep.json"
     write_text_atomic(out, json.dumps({
         "scenes": args.scenes, "effects": EFFECTS, "load_average_before": load_before,
-        "load_average_after": load_after, "cpus": os.cpu_count(), "pick_interval_px": pick["interval_px"],
+        "load_average_after": load_after, "cpus": os.cpu_count(),
+        "pick_interval_px": pick["interval_px"], "reference_interval_px": ref["interval_px"],
+        "slack": SLACK, "close_to_finest_px": [e["interval_px"] for e in close],
         "configured_interval_px": cfg.photo_model.interval_px, "rows": table}, indent=1))
     print(f"wrote {out}")
 
