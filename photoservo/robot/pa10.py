@@ -188,6 +188,16 @@ def _q(q) -> np.ndarray:
     return q
 
 
+def _dh_matrices(ct: np.ndarray, st: np.ndarray) -> np.ndarray:
+    """A_i for joint cosines/sines of shape (..., 7): (..., 7, 4, 4), standard DH (module doc)."""
+    A = np.zeros(ct.shape + (4, 4))
+    A[..., 0, 0], A[..., 0, 1], A[..., 0, 2], A[..., 0, 3] = ct, -st * _CA, st * _SA, DH_A_MM * ct
+    A[..., 1, 0], A[..., 1, 1], A[..., 1, 2], A[..., 1, 3] = st, ct * _CA, -ct * _SA, DH_A_MM * st
+    A[..., 2, 1], A[..., 2, 2], A[..., 2, 3] = _SA, _CA, DH_D_MM
+    A[..., 3, 3] = 1.0
+    return A
+
+
 def fk_frames(q) -> np.ndarray:
     """All link frames in the base frame, (8, 4, 4): [0] the base (identity), [i] = A_1 ... A_i,
     [7] the flange. Frame i-1's z axis is joint i's axis. Used to draw the arm and by `jacobian`.
@@ -195,18 +205,12 @@ def fk_frames(q) -> np.ndarray:
     q = np.asarray(q, dtype=float)
     if q.shape[-1:] != (N_JOINTS,) or q.ndim > 2:
         raise ValueError(f"expected {N_JOINTS} joint angles (or N x {N_JOINTS}), got shape {q.shape}")
-    Q = q.reshape(-1, N_JOINTS)
-    ct, st = np.cos(Q), np.sin(Q)
-    zero, one = np.zeros_like(Q), np.ones_like(Q)
-    A = np.stack([ct, -st * _CA, st * _SA, DH_A_MM * ct,
-                  st, ct * _CA, -ct * _SA, DH_A_MM * st,
-                  zero, _SA + zero, _CA + zero, DH_D_MM + zero,
-                  zero, zero, zero, one], axis=-1).reshape(Q.shape[0], N_JOINTS, 4, 4)
-    frames = np.empty((Q.shape[0], N_JOINTS + 1, 4, 4))
-    frames[:, 0] = np.eye(4)
+    A = _dh_matrices(np.cos(q), np.sin(q))
+    frames = np.empty(q.shape[:-1] + (N_JOINTS + 1, 4, 4))
+    frames[..., 0, :, :] = np.eye(4)
     for i in range(N_JOINTS):
-        frames[:, i + 1] = frames[:, i] @ A[:, i]
-    return frames[0] if q.ndim == 1 else frames
+        frames[..., i + 1, :, :] = frames[..., i, :, :] @ A[..., i, :, :]
+    return frames
 
 
 def fk(q, T_flange_tool: np.ndarray | None = None) -> np.ndarray:
