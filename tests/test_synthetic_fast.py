@@ -15,6 +15,8 @@ from photoservo.vision.synthetic import (
     CameraEffects,
     Scene,
     StereoRenderer,
+    _floater_layer,
+    _world_rays,
     coarse_rays,
     random_scene,
     render_view,
@@ -102,6 +104,17 @@ def test_fast_path_is_deterministic_and_its_noise_has_the_configured_sigma():
         assert abs(n[inner].mean()) < 0.1
     # consecutive frames get independent noise (another offset into the tile), not a fixed pattern
     assert abs(np.corrcoef(n1[inner].ravel(), n2[inner].ravel())[0, 1]) < 0.05
+
+
+def test_cached_photo_prefilter_gives_the_same_floater_layer():
+    sc = random_scene(15, CFG.synthetic, PM, kind="crab", effects=())
+    f, T = sc.scene.target, sc.T_world_left
+    d = _world_rays(StereoRenderer(sc.rig_true).rays_left, T[:3, :3])
+    ref = _floater_layer(f, T[:3, 3], d)
+    assert ref[1].max() > 0.99  # the creature is in view
+    for _ in range(2):  # the first call fills the cache, the second reads it
+        col, cov = _floater_layer(f, T[:3, 3], d, cache=True)
+        assert np.array_equal(col, ref[0]) and np.array_equal(cov, ref[1])
 
 
 def test_coarse_rays_are_block_centre_rays_and_bad_strides_are_refused():

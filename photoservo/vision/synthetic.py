@@ -301,9 +301,47 @@ def _floater_box(f: Floater) -> np.ndarray:
     return P @ f.T_world_model[:3, :3].T + f.T_world_model[:3, 3]
 
 
-def _floater_layer(f: Floater, C: np.ndarray, d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def _photo_layers(photo: np.ndarray, mask: np.ndarray, size: tuple[int, int] | None) -> tuple[np.ndarray, np.ndarray]:
+    """(premultiplied colour, coverage) float32 of a floater's photo: the mask softened into an
+    anti-aliased coverage, the photo premultiplied by it, both shrunk to `size` (w, h;
+    cv2.INTER_AREA: the prefilter to the on-screen footprint) unless size is None."""
+    a = cv2.GaussianBlur(mask.astype(np.float32) / 255.0, (0, 0), 0.7)  # soft, anti-aliased edge
+    premult = photo.astype(np.float32) * a[..., None]
+    if size is not None:
+        premult = cv2.resize(premult, size, interpolation=cv2.INTER_AREA)
+        a = cv2.resize(a, size, interpolation=cv2.INTER_AREA)
+    return premult, a
+
+
+class _ByIdentity:
+    """A cache key that hashes and compares by object identity; it holds the object, so the id
+    stays unique while the key is cached."""
+
+    __slots__ = ("obj",)
+
+    def __init__(self, obj: object) -> None:
+        self.obj = obj
+
+    def __hash__(self) -> int:
+        return id(self.obj)
+
+    def __eq__(self, other: object) -> bool:
+        return isinstance(other, _ByIdentity) and other.obj is self.obj
+
+
+@functools.lru_cache(maxsize=16)
+def _photo_layers_cached(photo: _ByIdentity, mask: _ByIdentity, size: tuple[int, int] | None) -> tuple[np.ndarray, np.ndarray]:
+    """`_photo_layers` memoised by the photo and mask OBJECTS (render_view's fast path: the
+    simulator renders the same photo every frame; the photo must not change in place)."""
+    premult, a = _photo_layers(photo.obj, mask.obj, size)
+    premult.flags.writeable = a.flags.writeable = False
+    return premult, a
+
+
+def _floater_layer(f: Floater, C: np.ndarray, d: np.ndarray, cache: bool = False) -> tuple[np.ndarray, np.ndarray]:
     """(colour h x w x 3 float32, coverage h x w float32 0..1) of one floater seen from camera
-    centre C (world) along rays d (world, h x w x 3)."""
+    centre C (world) along rays d (world, h x w x 3). cache: reuse the prefiltered photo of an
+    earlier frame at the same on-screen size (`_photo_layers_cached`; same result)."""
     Tm = np.linalg.inv(f.T_world_model)
     o = Tm[:3, :3] @ C + Tm[:3, 3]
     dm = d.astype(np.float64) @ Tm[:3, :3].T
@@ -324,15 +362,14 @@ def _floater_layer(f: Floater, C: np.ndarray, d: np.ndarray) -> tuple[np.ndarray
     H, W = f.mask.shape
     near = valid & (u > -2) & (v > -2) & (u < W + 1) & (v < H + 1)
     fp = _footprint(u, v, near)
-    a = cv2.GaussianBlur(f.mask.astype(np.float32) / 255.0, (0, 0), 0.7)  # soft, anti-aliased edge
-    premult = f.photo.astype(np.float32) * a[..., None]
+    size = None
     if fp > 1.2:  # prefilter the photo to the on-screen footprint (anti-aliasing)
         k = 1.0 / fp
         size = (max(2, round(W * k)), max(2, round(H * k)))
-        premult = cv2.resize(premult, size, interpolation=cv2.INTER_AREA)
-        a = cv2.resize(a, size, interpolation=cv2.INTER_AREA)
         sx, sy = size[0] / W, size[1] / H
         u, v = (u + 0.5) * sx - 0.5, (v + 0.5) * sy - 0.5
+    premult, a = (_photo_layers_cached(_ByIdentity(f.photo), _ByIdentity(f.mask), size) if cache
+                  else _photo_layers(f.photo, f.mask, size))
     mu, mv = u.astype(np.float32), v.astype(np.float32)
     cov = cv2.remap(a, mu, mv, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT, borderValue=0)
     col = cv2.remap(premult, mu, mv, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT, borderValue=0)
@@ -356,13 +393,15 @@ NOISE_TILE_PAD = 64  # the pre-drawn noise tile is this many px larger than the 
 
 
 @functools.lru_cache(maxsize=4)
-def _noise_tile(height: int, width: int) -> np.ndarray:
-    """Unit Gaussian noise (float32, (height + pad) x (width + pad) x 3), drawn once per image
-    size from a fixed seed; memoised, read-only. `_apply_effects(noise_tile=True)` adds a window
-    of it at a random offset: per-pixel independent noise for ~1 % of drawing it afresh."""
+def _noise_tile(height: int, width: int, sigma: float) -> np.ndarray:
+    """Gaussian noise of std `sigma` (float32, (height + pad) x (width + pad) x 3), drawn once
+    per image size from a fixed seed; memoised, read-only. `_apply_effects(noise_tile=True)`
+    adds or subtracts a window of it at a random offset: per-pixel independent noise for ~1 %
+    of the cost of drawing it afresh."""
     pad = NOISE_TILE_PAD
     tile = np.random.default_rng([height, width, 17]).standard_normal((height + pad, width + pad, 3),
                                                                        dtype=np.float32)
+    tile *= np.float32(sigma)
     tile.flags.writeable = False
     return tile
 
@@ -376,14 +415,14 @@ def _apply_effects(img: np.ndarray, fx: CameraEffects, rng: np.random.Generator,
     gains = fx.gain * np.asarray(fx.white_balance, np.float32)
     if np.any(gains != 1):  # (a product with 1.0 would only cost time)
         img = img * gains
-    if noise_tile:  # cv2.add rounds and saturates to uint8 in one pass (numpy's rint/clip: ~10x slower)
-        noise = (0.0, 0.0, 0.0, 0.0)  # a cv2 scalar: 0 in every channel
+    if noise_tile:  # cv2 rounds and saturates to uint8 in the same pass (numpy's rint/clip: ~10x slower)
         if fx.noise_sigma > 0:
             H, W = img.shape[:2]
             oy, ox, sign = rng.integers(0, NOISE_TILE_PAD, 3)
-            k = np.float32(fx.noise_sigma if sign % 2 else -fx.noise_sigma)
-            noise = k * _noise_tile(H, W)[oy:oy + H, ox:ox + W, :img.shape[2]]
-        out = cv2.add(img, noise, dtype=cv2.CV_8U)
+            noise = _noise_tile(H, W, float(fx.noise_sigma))[oy:oy + H, ox:ox + W, :img.shape[2]]
+            out = (cv2.add if sign % 2 else cv2.subtract)(img, noise, dtype=cv2.CV_8U)
+        else:
+            out = cv2.add(img, (0.0, 0.0, 0.0, 0.0), dtype=cv2.CV_8U)
     else:
         if fx.noise_sigma > 0:
             img = img + rng.normal(0, fx.noise_sigma, img.shape).astype(np.float32)
@@ -478,7 +517,7 @@ def render_view(scene: Scene, cam: Camera, T_world_cam: np.ndarray, t: float = 0
         win = _window(cam, T_cam_world, _floater_box(f))
         if win is None:
             continue
-        col, cov = _floater_layer(f, C, _world_rays(rays[win], R) if fast else d[win])
+        col, cov = _floater_layer(f, C, _world_rays(rays[win], R) if fast else d[win], cache=fast)
         col = col * (0.95 + 0.12 * (shade[win] - 1.0))[..., None]  # the swell shades it too
         img[win] = img[win] * (1 - cov[..., None]) + col * cov[..., None]
     if scene.foam is not None and len(scene.foam.patches):
