@@ -64,13 +64,20 @@ def make_scene(i: int, cfg, empty: bool = False, distractor: bool = False, other
     return sc, build_photo_model(sc.photo, cfg.photo_model)
 
 
-def errors(est, truth: dict) -> dict:
+def timed(fn, *args, **kw):
+    """(result, CPU seconds of this process) — wall time is in the estimate itself."""
+    c0 = time.process_time()
+    out = fn(*args, **kw)
+    return out, time.process_time() - c0
+
+
+def errors(est, truth: dict, cpu: float = math.nan) -> dict:
     """Errors of an estimate (found or not) against a synthetic truth."""
     z = truth["position_mm"][2]
     row = {"found": bool(est.found), "distance_mm": z, "tilt_true_deg": truth["tilt_deg"],
            "same_photo": truth["same_photo"], "fitness": est.fitness, "detection_score": est.detection_score,
            "generations": est.generations,
-           "evaluations": est.evaluations, "seconds": est.seconds}
+           "evaluations": est.evaluations, "seconds": est.seconds, "cpu_seconds": cpu}
     if not est.found:
         row.update(pos_mm=math.inf, pos_pct=math.inf, depth_pct=math.inf, heading_deg=math.inf,
                    tilt_deg=math.inf, size_pct=math.inf, success=False)
@@ -123,12 +130,16 @@ def summary(rows: list[dict], max_generations: int) -> dict:
     for key in ("pos_mm", "pos_pct", "depth_pct", "heading_deg", "tilt_deg", "size_pct"):
         out[key] = {"median": q(key, 50), "p90": q(key, 90)}
     out["success_rate"] = sum(r["success"] for r in rows) / max(n, 1)
-    out["converged_1s_rate"] = sum(r["success"] and r["seconds"] <= 1.0 and r["generations"] < max_generations
-                                   for r in rows) / max(n, 1)
+    def conv(r, key):
+        return r["success"] and r[key] <= 1.0 and r["generations"] < max_generations
+    out["converged_1s_rate"] = sum(conv(r, "seconds") for r in rows) / max(n, 1)
+    out["converged_1s_cpu_rate"] = sum(conv(r, "cpu_seconds") for r in rows) / max(n, 1)
     out["generations_median"] = q("generations", 50)
     out["evaluations_median"] = q("evaluations", 50)
     out["seconds_median"] = q("seconds", 50)
     out["seconds_p90"] = q("seconds", 90)
+    out["cpu_seconds_median"] = q("cpu_seconds", 50)
+    out["cpu_seconds_p90"] = q("cpu_seconds", 90)
     return out
 
 
@@ -150,15 +161,17 @@ def finite(o):
 def fmt_row(name: str, s: dict) -> str:
     def mp(k, d=1):
         return f"{s[k]['median']:.{d}f}/{s[k]['p90']:.{d}f}"
-    return (f"{name:<34} {s['scenes']:>3} {100 * s['success_rate']:5.0f}% {100 * s['converged_1s_rate']:5.0f}% "
+    return (f"{name:<34} {s['scenes']:>3} {100 * s['success_rate']:5.0f}% {100 * s['converged_1s_rate']:4.0f}/"
+            f"{100 * s['converged_1s_cpu_rate']:<3.0f}% "
             f"{mp('pos_mm'):>12} {mp('pos_pct', 2):>11} {mp('depth_pct', 2):>11} {mp('heading_deg'):>10} "
-            f"{mp('tilt_deg'):>10} {mp('size_pct'):>10} {s['generations_median']:6.0f} {s['seconds_median']:6.2f}")
+            f"{mp('tilt_deg'):>10} {mp('size_pct'):>10} {s['generations_median']:6.0f} {s['evaluations_median']:6.0f} "
+            f"{s['seconds_median']:5.2f}/{s['cpu_seconds_median']:<5.2f}")
 
 
-HEADER = (f"{'configuration':<34} {'n':>3} {'succ':>6} {'<=1s':>6} {'pos mm':>12} {'pos %':>11} {'depth %':>11} "
-          f"{'head deg':>10} {'tilt deg':>10} {'size %':>10} {'gens':>6} {'sec':>6}\n"
-          f"{'':<34} {'':>3} {'':>6} {'':>6} {'med/p90':>12} {'med/p90':>11} {'med/p90':>11} {'med/p90':>10} "
-          f"{'med/p90':>10} {'med/p90':>10} {'med':>6} {'med':>6}")
+HEADER = (f"{'configuration':<34} {'n':>3} {'succ':>6} {'<=1s':>9} {'pos mm':>12} {'pos %':>11} {'depth %':>11} "
+          f"{'head deg':>10} {'tilt deg':>10} {'size %':>10} {'gens':>6} {'evals':>6} {'seconds':>11}\n"
+          f"{'':<34} {'':>3} {'':>6} {'wall/cpu':>9} {'med/p90':>12} {'med/p90':>11} {'med/p90':>11} {'med/p90':>10} "
+          f"{'med/p90':>10} {'med/p90':>10} {'med':>6} {'med':>6} {'wall/cpu med':>11}")
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -185,8 +198,8 @@ def main(argv: list[str] | None = None) -> int:
         other = i % 2 == 1
         sc, model = make_scene(i, cfg, other=other, distractor=i % 4 == 3)
         scenes.append((sc, model))
-        est = estimate(model, sc.left, sc.right, sc.rig, cfg.ga, cfg.estimator, cfg.fitness, seed=i)
-        r = errors(est, sc.truth)
+        est, cpu = timed(estimate, model, sc.left, sc.right, sc.rig, cfg.ga, cfg.estimator, cfg.fitness, seed=i)
+        r = errors(est, sc.truth, cpu)
         r.update(seed=1000 + i, kind=KINDS[i % 3], distractor=i % 4 == 3)
         rows.append(r)
         print(f"  scene {i:3d} {r['kind']:<5} {'other' if other else 'same ':<5} z {r['distance_mm']:6.0f} "
@@ -212,12 +225,13 @@ def main(argv: list[str] | None = None) -> int:
     unseeded = dataclasses.replace(cfg.estimator, seeding=False, global_island=True)
     for i in range(min(a.baseline, len(scenes))):
         sc, model = scenes[i]
-        r = errors(run_paper(sc, model, cfg, seed=i), sc.truth)
+        est, cpu = timed(run_paper, sc, model, cfg, seed=i)
+        r = errors(est, sc.truth, cpu)
         baseline_rows["paper (68-bit, 30 ind., 500 gen, narrow box)"].append(r)
-        est = estimate(model, sc.left, sc.right, sc.rig, cfg.ga, unseeded, cfg.fitness, seed=i)
-        baseline_rows["default GA, no seeding (whole volume)"].append(errors(est, sc.truth))
-        est = estimate(model, sc.left, sc.right, sc.rig_true, cfg.ga, cfg.estimator, cfg.fitness, seed=i)
-        baseline_rows["default, told the rendering rig (no calib. error)"].append(errors(est, sc.truth))
+        est, cpu = timed(estimate, model, sc.left, sc.right, sc.rig, cfg.ga, unseeded, cfg.fitness, seed=i)
+        baseline_rows["default GA, no seeding (whole volume)"].append(errors(est, sc.truth, cpu))
+        est, cpu = timed(estimate, model, sc.left, sc.right, sc.rig_true, cfg.ga, cfg.estimator, cfg.fitness, seed=i)
+        baseline_rows["default, told the rendering rig (no calib. error)"].append(errors(est, sc.truth, cpu))
         print(f"  baseline scene {i}: paper pos {r['pos_pct']:.2f}% ; unseeded pos "
               f"{baseline_rows['default GA, no seeding (whole volume)'][-1]['pos_pct']:.2f}%", flush=True)
 

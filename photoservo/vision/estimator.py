@@ -58,6 +58,7 @@ from photoservo.vision.pose import (
     rotation_from_heading_tilt,
 )
 from photoservo.vision.rig import Rig
+from photoservo.vision.stereo_plane import align_to_plane, fit_target_plane, grey
 
 GENE_NAMES = {
     "image": ("u_px", "v_px", "q_per_m", "psi", "tilt_x", "tilt_y", "ln_s"),
@@ -83,6 +84,8 @@ class EstimatorParams:
     epipolar_tol_px: float  # blob centroids this far from the epipolar line still pair (px)
     window_depth: float  # seeded window: inverse depth +- this fraction
     window_scale: float  # seeded window: ln s +- this
+    plane_refine: bool  # correct the tilt by a stereo plane fit over the inner points (vision/stereo_plane.py)
+    plane_fitness_tol: float  # ...accepted when the re-fitted pose's fitness is at most this below the GA's
     min_generations: int  # never stop before this many generations
     max_generations: int  # always stop after this many generations
     patience: int  # converged: no improvement beyond the tolerances for this many generations
@@ -413,6 +416,35 @@ class PoseSearch:
         return Candidate(best.R, best.position_mm, best.alpha, best.fitness, self.ga.generation, best.source)
 
 
+    def refine_tilt(self, best: Candidate, left_bgr: np.ndarray, right_bgr: np.ndarray) -> Candidate:
+        """Tilt from the disparity gradient (`vision/stereo_plane.py`): fit the target's plane
+        from stereo over the inner points that land on target hue, turn the pose onto it, re-fit
+        position, heading and scale by a short GA with the tilt held within 1.5 deg, and keep the
+        result when its fitness is at most `plane_fitness_tol` below `best` (the hue fitness
+        vetoes a plane fitted to the wrong thing)."""
+        p = self.est_params
+        lut = np.zeros(256, bool)
+        lut[:HUE_BINS] = np.asarray(self.model.target_hues, bool)
+        plane = fit_target_plane(best.R, best.position_mm, best.alpha, self.model, grey(left_bgr),
+                                 grey(right_bgr), self.rig, on_target=lut[self.frame.left])
+        if plane is None:
+            return best
+        R2, t2 = align_to_plane(best.R, best.position_mm, plane)
+        short = dataclasses.replace(p, min_generations=max(1, p.patience // 2), patience=max(2, p.patience // 2),
+                                    max_generations=max(p.patience, p.max_generations // 4))
+        sub = PoseSearch(self.model, self.rig, self.frame, self.ga.params, short, self.fit_params, self.ga.rng)
+        z = float(t2[2])
+        sub.ga.reset(sub.space.window(R2, t2, best.alpha, position_mm=0.02 * z, heading_deg=5.0, tilt_deg=1.5,
+                                      alpha_frac=0.05))
+        sub.seed(R2, t2, best.alpha)
+        c = sub.run(ambiguity_check=False)
+        self.ga.evaluations += sub.ga.evaluations
+        self.ga.generation += c.generations
+        if c.fitness >= best.fitness - p.plane_fitness_tol:
+            return Candidate(c.R, c.position_mm, c.alpha, c.fitness, self.ga.generation, best.source)
+        return best
+
+
 def alternatives(R: np.ndarray, t: np.ndarray) -> list[np.ndarray]:
     """Orientations a flat target's pose is easily confused with (see `PoseSearch.run`): the
     planar-ambiguity mirror, the heading turned by 180 degrees about the model normal, and both."""
@@ -645,6 +677,8 @@ def estimate(model: PhotoModel, left_bgr: np.ndarray, right_bgr: np.ndarray, rig
     # the look-alike twins (mirror, heading + 180 deg) are tried for the leading island only
     lead = int(np.argmax([c.fitness for c in firsts]))
     firsts[lead] = islands[lead][1].resolve_twins(firsts[lead])
+    if p.plane_refine and np.isfinite(firsts[lead].fitness):
+        firsts[lead] = islands[lead][1].refine_tilt(firsts[lead], left_bgr, right_bgr)
     for (name, search), c in zip(islands, firsts):
         evaluations += search.ga.evaluations
         if np.isfinite(c.fitness):
