@@ -12,6 +12,7 @@ running the missed periods back to back.
 
 from __future__ import annotations
 
+import os
 import time
 
 
@@ -40,3 +41,12 @@ class Rate:
         late = max(0.0, woke - self.t_next)
         self.t_next += self.T
         return late
+
+
+def set_realtime(priority: int) -> None:
+    """Give the calling process SCHED_FIFO real-time priority `priority` (1..99, Linux), so the
+    control loop is not starved by other work on the machine. Threads started afterwards inherit
+    it, so call it before starting the link. Raises OSError (e.g. EPERM) when not permitted."""
+    if not 1 <= priority <= 99:
+        raise ValueError(f"real-time priority {priority} is outside 1..99")
+    os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(priority))

@@ -122,7 +122,8 @@ class Link:
         self.version: P.VersionInfo | None = None
         self.setpoints_sent = 0
         self.setpoints_dropped = 0
-        self.nacks: deque[P.Nack] = deque(maxlen=64)
+        self.nacks: deque[P.Nack] = deque(maxlen=64)  # the last 64 NACKs
+        self.refused = 0  # setpoints the bridge refused (NACK), all of them
         self._ser: serial.SerialBase | None = None
         self._seq = 0
         self._tx_lock = threading.Lock()
@@ -460,6 +461,7 @@ class Link:
             elif isinstance(m, (P.Ack, P.Nack)):
                 if isinstance(m, P.Nack):
                     self.nacks.append(m)
+                    self.refused += m.msg_type == P.MsgType.SETPOINT
                 self._replies[m.seq] = m
                 if len(self._replies) > 256:
                     self._replies.pop(next(iter(self._replies)))

@@ -1,4 +1,4 @@
-"""photoservo move --port PORT (--joints J1 .. J7 | --home) [--speed PCT]
+"""photoservo move --port PORT (--joints J1 .. J7 | --home) [--speed PCT] [--rt-priority N]
                   [--record OUT.rrd | --no-record] [--config CFG.toml] [--set ...]
 
 Moves the PA-10 to the given joint angles (degrees, order S1 S2 S3 E1 E2 W1 W2) or to the home
@@ -32,6 +32,7 @@ from photoservo.robot.clock import Rate
 from photoservo.robot.link import Link, LinkError
 from photoservo.robot.pa10 import HOME_Q, JOINT_NAMES, load_limits
 from photoservo.servo.cmd_config import add_config_options
+from photoservo.servo.cmd_pa10_sim import realtime_or_input_error
 from photoservo.servo.config import load_config
 from photoservo.servo.motion import Motion
 from photoservo.tomlconf import dump_config
@@ -47,6 +48,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     rec.add_argument("--record", metavar="OUT.rrd", help="recording path (default logs/<UTC time>_move.rrd)")
     rec.add_argument("--no-record", action="store_true", help="do not record to Rerun")
     p.add_argument("--timeout", type=float, default=60.0, metavar="S", help="give up after this long (s, default 60)")
+    p.add_argument("--rt-priority", type=int, metavar="N",
+                   help="run the control loop with SCHED_FIFO priority N (1..99; Linux, needs permission): "
+                        "holds the 250 Hz period on a loaded machine (benchmarks/link.py)")
     add_config_options(p)
 
 
@@ -106,6 +110,8 @@ def run(args: argparse.Namespace) -> int:
     target = parse_target(args)
     motion.check_target(target)  # ranges less the margin, keep-out: before touching the port
 
+    if args.rt_priority is not None:  # before the link's reader thread starts: it inherits it
+        realtime_or_input_error(args.rt_priority)
     link = Link(args.port, cfg.link, JOINT_NAMES)
     try:
         version = link.open()
@@ -172,7 +178,7 @@ def _move(link: Link, motion: Motion, target: np.ndarray, rec, timeout: float) -
         s = link.wait_until_still()
         err = np.degrees(np.abs(s.q - target))
         print(f"move: done, largest joint error {err.max():.3f} deg ({JOINT_NAMES[int(err.argmax())]}); "
-              f"setpoints sent {link.setpoints_sent}, refused {len(link.nacks)}, "
+              f"setpoints sent {link.setpoints_sent}, refused {link.refused}, "
               f"CRC errors {link.crc_errors}", file=sys.stderr)
         if reasons:
             print("move: motion notes: " + "; ".join(f"{k} x{n}" for k, n in reasons.items()), file=sys.stderr)

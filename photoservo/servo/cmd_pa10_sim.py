@@ -14,12 +14,12 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
-import os
 import signal
 import sys
 import threading
 
 from photoservo.errors import InputError
+from photoservo.robot.clock import set_realtime
 from photoservo.robot.emulator import Emulator
 from photoservo.servo.cmd_config import add_config_options
 from photoservo.servo.config import load_config
@@ -52,13 +52,8 @@ def run(args: argparse.Namespace) -> int:
         changes["state_hz"] = min(cfg.emulator.state_hz, args.rate)
     params = dataclasses.replace(cfg.emulator, **changes)
     params.validate("emulator")  # the flags go through the config's checks (InputError, exit 2)
-    if args.rt_priority is not None:
-        if not 1 <= args.rt_priority <= 99:
-            raise InputError(f"--rt-priority {args.rt_priority}: must be within 1..99")
-        try:  # before the emulator thread starts, so that it inherits the policy
-            os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(args.rt_priority))
-        except (OSError, AttributeError) as e:
-            raise InputError(f"--rt-priority {args.rt_priority}: not permitted here ({e})") from None
+    if args.rt_priority is not None:  # before the emulator thread starts: it inherits the policy
+        realtime_or_input_error(args.rt_priority)
     emu = Emulator(params, link=args.link)
     done = threading.Event()
 
@@ -87,3 +82,14 @@ def run(args: argparse.Namespace) -> int:
           f"(CRC/COBS/length) {d.errors}, resyncs {d.resyncs}; states sent {emu.states_sent}, "
           f"skipped (line busy) {emu.states_skipped}", file=sys.stderr)
     return 0
+
+
+def realtime_or_input_error(priority: int) -> None:
+    """`--rt-priority N`: SCHED_FIFO for this process, or a one-line InputError."""
+    try:
+        set_realtime(priority)
+    except ValueError as e:
+        raise InputError(f"--rt-priority {priority}: {e}") from None
+    except (OSError, AttributeError) as e:
+        raise InputError(f"--rt-priority {priority}: not permitted here ({e}); run without it, "
+                         "or grant CAP_SYS_NICE / an rtprio limit") from None
