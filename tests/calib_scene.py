@@ -6,7 +6,7 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-from photoservo.vision.board import Board, BoardRenderer
+from photoservo.vision.board import Board, BoardRenderer, MarkerRenderer
 from photoservo.vision.calibrate import make_T
 from photoservo.vision.rig import Camera, Rig
 
@@ -91,3 +91,18 @@ def look_at_flange_poses(T_base_board: np.ndarray, T_flange_left: np.ndarray, n:
         T_base_left = make_T(R_cam, p_cam)
         poses.append(T_base_left @ np.linalg.inv(T_flange_left))
     return poses
+
+
+def render_markers(rig, T_base_left, markers, noise=1.0, seed=0):
+    """Left and right images of single ArUco markers [(id, side_mm, T_base_marker)] floating in
+    one view (composited), as BGR images."""
+    rng = np.random.default_rng(seed)
+    images = []
+    for cam, T_cam_left in ((rig.left, np.eye(4)), (rig.right, make_T(rig.R, rig.T))):
+        img = np.full((cam.size[1], cam.size[0], 3), 110, np.uint8)
+        for marker_id, side, T_bm in markers:
+            T = T_cam_left @ np.linalg.inv(T_base_left) @ T_bm
+            img = MarkerRenderer("DICT_4X4_250", marker_id, side, cam).render(T[:3, :3], T[:3, 3], base=img)
+        noisy = img.astype(float) + rng.normal(0, noise, img.shape)
+        images.append(np.clip(np.rint(noisy), 0, 255).astype(np.uint8))
+    return images

@@ -10,6 +10,7 @@ import pytest
 from calib_scene import (
     SIZE,
     look_at_flange_poses,
+    render_markers,
     render_stereo,
     renderer,
     stereo_board_poses,
@@ -271,3 +272,26 @@ def test_water_plane_errors():
         fit_water_plane(np.zeros((2, 3)))
     with pytest.raises(InputError, match="one line"):
         fit_water_plane(np.array([[0.0, 0, 0], [1, 1, 1], [2, 2, 2], [3, 3, 3]]))
+
+
+def test_water_plane_from_single_markers(rig):
+    """Four 60 mm markers bobbing on water at z = -300 mm (each tipped up to ~3 deg), one of
+    them outside the right camera's view: three triangulated, one by PnP; height within 2 mm."""
+    from photoservo.vision.board import detect_markers
+    from photoservo.vision.calibrate import marker_points_left
+
+    water_z = -300.0
+    T_base_left = make_T(np.diag([1.0, -1.0, -1.0]), np.array([600.0, 0.0, water_z + 520.0]))
+    rng = np.random.default_rng(3)
+    face_up = np.diag([1.0, -1.0, -1.0])
+    spots = [(-50.0, -80.0), (90.0, -60.0), (20.0, 90.0), (-215.0, 40.0)]  # the last: left image only
+    markers = [(k, 60.0, make_T(face_up @ cv2.Rodrigues(rng.uniform(-0.05, 0.05, 3))[0],
+                                np.array([600.0 + x, y, water_z]))) for k, (x, y) in enumerate(spots)]
+    left, right = render_markers(rig, T_base_left, markers)
+    dl, dr = detect_markers(left), detect_markers(right)
+    assert sorted(dl) == [0, 1, 2, 3] and 3 not in dr and {0, 1, 2} <= set(dr)
+    P, n_tri, n_pnp = marker_points_left(dl, dr, 60.0, rig)
+    assert (n_tri, n_pnp) == (3, 1)
+    plane = fit_water_plane(P @ T_base_left[:3, :3].T + T_base_left[:3, 3])
+    assert plane.z_mm == pytest.approx(water_z, abs=2.0)
+    assert plane.tilt_deg < 2.0

@@ -11,6 +11,7 @@ import pytest
 from calib_scene import (
     SIZE,
     look_at_flange_poses,
+    render_markers,
     render_stereo,
     renderer,
     stereo_board_poses,
@@ -454,3 +455,34 @@ def test_capture_unopenable_port_is_one_line(board_videos, tmp_path, capsys):
                             "--port", str(tmp_path / "no-such-tty"), "--interval", "1", "--save", str(tmp_path / "p.rrd"),
                             "--out", str(tmp_path / "c")], capsys)
     assert_one_line_error(code, err, f"--port {tmp_path / 'no-such-tty'}: cannot open")
+
+
+def test_water_from_single_markers_in_saved_views(tmp_path, capsys):
+    """Three 60 mm markers floating at z = -280 mm, one flange pose, `--markers 60`."""
+    water_z = -280.0
+    rig_t, X = true_rig(), true_hand_eye()
+    T_base_left = make_T(np.diag([1.0, -1.0, -1.0]), np.array([600.0, 0.0, water_z + 500.0]))
+    face_up = np.diag([1.0, -1.0, -1.0])
+    markers = [(k, 60.0, make_T(face_up, np.array([600.0 + x, y, water_z])))
+               for k, (x, y) in enumerate([(-40.0, -70.0), (90.0, -50.0), (20.0, 80.0)])]
+    left, right = render_markers(rig_t, T_base_left, markers)
+    views = tmp_path / "water"
+    for side, img in (("left", left), ("right", right)):
+        (views / side).mkdir(parents=True)
+        cv2.imwrite(str(views / side / "0000.png"), img)
+    T_bf = T_base_left @ np.linalg.inv(X)
+    (views / "poses.csv").write_text("name,x_mm,y_mm,z_mm,rx_rad,ry_rad,rz_rad\n0000," + ",".join(pose_row(T_bf)) + "\n")
+    rig = rig_file(tmp_path, hand_eye=(X[:3, :3], X[:3, 3]))
+    code, text, err = run_cli(["calibrate", "water", "--rig", str(rig), "--views", str(views), "--markers", "60"], capsys)
+    assert code == 0, err
+    assert "3 markers triangulated, 0 by PnP" in text
+    z = float(text.split("water_z_mm = ")[1].split()[0])
+    assert z == pytest.approx(water_z, abs=2.0)
+
+
+def test_water_needs_a_target(tmp_path, capsys):
+    X = true_hand_eye()
+    (tmp_path / "v").mkdir()
+    code, _, err = run_cli(["calibrate", "water", "--rig", str(rig_file(tmp_path, hand_eye=(X[:3, :3], X[:3, 3]))),
+                            "--views", str(tmp_path / "v")], capsys)
+    assert_one_line_error(code, err, "give the floating target: --board COLSxROWS --square-mm S, or --markers SIDE_MM")

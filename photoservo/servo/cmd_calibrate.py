@@ -29,6 +29,7 @@ import time
 import tomllib
 from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import cv2
 import numpy as np
@@ -44,9 +45,11 @@ from photoservo.vision.board import (
     BoardDetection,
     board_texture,
     detect_board,
+    detect_markers,
     draw_detection,
 )
 from photoservo.vision.calibrate import (
+    MIN_COMMON_CORNERS,
     MIN_HAND_EYE_VIEWS,
     MIN_ROTATION_DEG,
     board_points_left,
@@ -55,6 +58,7 @@ from photoservo.vision.calibrate import (
     calibrate_stereo,
     fit_water_plane,
     make_T,
+    marker_points_left,
     pair_detections,
     rotation_angle_deg,
 )
@@ -77,9 +81,9 @@ BOARD_HELP = "board size as COLSxROWS INNER corners (where four squares meet): 1
 # ----------------------------------------------------------------------------- arguments
 
 
-def _board_options(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--board", required=True, metavar="COLSxROWS", help=BOARD_HELP)
-    p.add_argument("--square-mm", type=float, required=True, metavar="S", help="square side (mm), as printed")
+def _board_options(p: argparse.ArgumentParser, required: bool = True) -> None:
+    p.add_argument("--board", required=required, metavar="COLSxROWS", help=BOARD_HELP)
+    p.add_argument("--square-mm", type=float, required=required, metavar="S", help="square side (mm), as printed")
     p.add_argument("--charuco", action="store_true", help="a ChArUco board (markers in the white squares)")
     p.add_argument("--marker-mm", type=float, default=0.0, metavar="M",
                    help="ChArUco marker side (mm); default 0.7 x square")
@@ -164,12 +168,15 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help=f"write the result even when the poses rotate less than {MIN_ROTATION_DEG:.0f} deg")
 
     w = sub.add_parser("water", help="the water surface height in the base frame",
-                       description="Fit the water plane to boards floating on it, seen by the calibrated "
-                                   "rig (with [hand_eye]) from known flange poses. One view of one board is "
-                                   "enough; several boards spread out give the tilt too.")
+                       description="Fit the water plane to a board or single ArUco markers (--markers) "
+                                   "floating on it, seen by the calibrated rig (with [hand_eye]) from known "
+                                   "flange poses. One view of one board or of three markers is enough; "
+                                   "markers spread out give the tilt too.")
     w.add_argument("--rig", required=True, metavar="RIG.toml")
     w.add_argument("--views", metavar="DIR", help="DIR/left (+ DIR/right) images, or DIR")
     w.add_argument("--poses", metavar="POSES.csv", help="flange poses (default DIR/poses.csv)")
+    w.add_argument("--markers", type=float, metavar="SIDE_MM",
+                   help="single ArUco markers of this side (mm, black square) from --dict instead of a board")
     w.add_argument("--live", action="store_true",
                    help="measure now: read pairs from the cameras ([cameras] or the source flags) and the "
                         "flange pose from the arm (--port) instead of --views")
@@ -178,7 +185,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     w.add_argument("--port", help="--live: serial port of the arm's bridge")
     _source_options(w)
     add_config_options(w)
-    _board_options(w)
+    _board_options(w, required=False)
     w.add_argument("--update", metavar="CFG.toml", help="write the height into this config file")
     w.add_argument("--key", default="world.water_z_mm", metavar="SECTION.KEY",
                    help="config key for --update (default world.water_z_mm)")
@@ -292,9 +299,10 @@ def _views_dir(views: Path, side: str) -> Path | None:
     return views if side == "left" and views.is_dir() else None
 
 
-def _posed_views(args: argparse.Namespace, rig: Rig, board: Board, want_right: bool
-                 ) -> list[tuple[str, np.ndarray, BoardDetection | None, BoardDetection | None]]:
-    """(name, T_base_flange, left detection, right detection) for each pose row with an image."""
+def _posed_views(args: argparse.Namespace, rig: Rig, detect: Callable[[np.ndarray], Any], want_right: bool
+                 ) -> list[tuple[str, np.ndarray, Any, Any]]:
+    """(name, T_base_flange, left detection, right detection) for each pose row with an image;
+    `detect(image)` finds the target (None when absent)."""
     views = Path(args.views)
     left_dir = _views_dir(views, "left")
     if left_dir is None:
@@ -308,14 +316,14 @@ def _posed_views(args: argparse.Namespace, rig: Rig, board: Board, want_right: b
         if name not in left:
             print(f"  {name}: no image in {left_dir}, skipped")
             continue
-        dl = detect_board(_read_sized(left[name], rig.left.size, "left image"), board)
-        dr = detect_board(_read_sized(right[name], rig.right.size, "right image"), board) if name in right else None
+        dl = detect(_read_sized(left[name], rig.left.size, "left image"))
+        dr = detect(_read_sized(right[name], rig.right.size, "right image")) if name in right else None
         out.append((name, T, dl, dr))
     return out
 
 
-def _live_views(args: argparse.Namespace, rig: Rig, board: Board
-                ) -> list[tuple[str, np.ndarray, BoardDetection | None, BoardDetection | None]]:
+def _live_views(args: argparse.Namespace, rig: Rig, detect: Callable[[np.ndarray], Any]
+                ) -> list[tuple[str, np.ndarray, Any, Any]]:
     """`--frames` pairs with the board in the left image, each with the flange pose at its
     capture time from the arm's link (forward kinematics of the interpolated joint state)."""
     from photoservo.robot.pa10 import fk
@@ -327,12 +335,12 @@ def _live_views(args: argparse.Namespace, rig: Rig, board: Board
     config = load_config(args.config, args.overrides)
     source = make_source(_cameras(args, config.cameras))
     try:
-        return _read_live(args, rig, board, Link(args.port, config.link), source, fk)
+        return _read_live(args, rig, detect, Link(args.port, config.link), source, fk)
     except LinkError as e:
         raise InputError(f"--port {args.port}: {e}") from None
 
 
-def _read_live(args: argparse.Namespace, rig: Rig, board: Board, link: Link, source: StereoSource,
+def _read_live(args: argparse.Namespace, rig: Rig, detect: Callable[[np.ndarray], Any], link: Link, source: StereoSource,
                fk: Callable[[np.ndarray], np.ndarray]) -> list:
     out: list = []
     with link, source:
@@ -343,20 +351,19 @@ def _read_live(args: argparse.Namespace, rig: Rig, board: Board, link: Link, sou
             if (frame.left.shape[1], frame.left.shape[0]) != tuple(rig.left.size):
                 raise InputError(f"camera image is {frame.left.shape[1]}x{frame.left.shape[0]}, the rig's left "
                                  f"camera is {rig.left.size[0]}x{rig.left.size[1]}")
-            dl = detect_board(frame.left, board)
+            dl = detect(frame.left)
             if dl is None:
                 continue
             try:
                 q = link.state_at(frame.t).q
             except LookupError:
                 continue
-            out.append((f"frame {frame.index}", np.asarray(fk(q), dtype=np.float64), dl,
-                        detect_board(frame.right, board)))
+            out.append((f"frame {frame.index}", np.asarray(fk(q), dtype=np.float64), dl, detect(frame.right)))
             if len(out) >= args.frames:
                 break
         print(f"  {source.stats.summary()}")
     if not out:
-        raise InputError(f"--live: the board was not found in the left camera within {LIVE_TIMEOUT_S:.0f} s")
+        raise InputError(f"--live: the target was not found in the left camera within {LIVE_TIMEOUT_S:.0f} s")
     return out
 
 
@@ -445,7 +452,7 @@ def run_hand_eye(args: argparse.Namespace) -> int:
                          "by 180 degrees, so its pose is ambiguous between views; use a board with one odd "
                          "and one even corner count, or --charuco")
     T_bf, T_lb, used = [], [], []
-    for name, T, dl, _ in _posed_views(args, rig, board, want_right=False):
+    for name, T, dl, _ in _posed_views(args, rig, lambda img: detect_board(img, board), want_right=False):
         if dl is None:
             print(f"  {name}: skipped, board not found in the left image")
             continue
@@ -506,28 +513,54 @@ def set_toml_key(text: str, dotted: str, value: float) -> str:
     return out
 
 
+def _water_target(args: argparse.Namespace, rig: Rig
+                  ) -> tuple[Callable[[np.ndarray], Any], Callable[[Any, Any], tuple[np.ndarray, str]]]:
+    """(detect(image) -> detection or None, locate(left, right) -> (points in the left camera
+    frame (n, 3) mm, how)) for a floating board or for single markers (--markers)."""
+    if args.markers is not None:
+        side = args.markers
+        if not side > 0:
+            raise InputError(f"--markers must be the marker side in mm (> 0), got {side}")
+        if not hasattr(cv2.aruco, args.dict):
+            raise InputError(f"--dict: unknown ArUco dictionary '{args.dict}'")
+
+        def locate_markers(dl: dict, dr: dict | None) -> tuple[np.ndarray, str]:
+            P, n_tri, n_pnp = marker_points_left(dl, dr, side, rig)
+            return P, f"{n_tri} markers triangulated, {n_pnp} by PnP"
+
+        return (lambda img: detect_markers(img, args.dict) or None), locate_markers
+    if not args.board or args.square_mm is None:
+        raise InputError("give the floating target: --board COLSxROWS --square-mm S, or --markers SIDE_MM")
+    board = _board(args)
+
+    def locate_board(dl: BoardDetection, dr: BoardDetection | None) -> tuple[np.ndarray, str]:
+        both = dr is not None and len(np.intersect1d(dl.ids, dr.ids)) >= MIN_COMMON_CORNERS
+        return board_points_left(dl, dr, board, rig), "triangulated" if both else "PnP"
+
+    return (lambda img: detect_board(img, board)), locate_board
+
+
 def run_water(args: argparse.Namespace) -> int:
     rig = load_rig(args.rig)
     if rig.hand_eye is None:
         raise InputError(f"{args.rig}: no [hand_eye] table; run `photoservo calibrate hand-eye` first")
-    board = _board(args)
     T_flange_left = rig.T_flange_left()
     if args.live == bool(args.views):
         raise InputError("give either --views DIR (saved views) or --live (cameras and arm now)")
-    views = _live_views(args, rig, board) if args.live else _posed_views(args, rig, board, want_right=True)
+    detect, locate = _water_target(args, rig)
+    views = _live_views(args, rig, detect) if args.live else _posed_views(args, rig, detect, want_right=True)
     points = []
     for name, T_bf, dl, dr in views:
-        P = board_points_left(dl, dr, board, rig)
-        if len(P) == 0:
-            print(f"  {name}: skipped, board not found in the left image")
+        if dl is None:
+            print(f"  {name}: skipped, nothing found in the left image")
             continue
+        P, how = locate(dl, dr)
         T_base_left = T_bf @ T_flange_left
         P_base = P @ T_base_left[:3, :3].T + T_base_left[:3, 3]
-        how = "triangulated" if dl is not None and dr is not None and len(np.intersect1d(dl.ids, dr.ids)) >= 6 else "PnP"
         print(f"  {name}: {len(P)} corners ({how}), mean z {P_base[:, 2].mean():.1f} mm")
         points.append(P_base)
     if not points:
-        raise InputError(f"--views {args.views}: the board was not found in any view")
+        raise InputError(f"--views {args.views}: the board or markers were not found in any view")
     plane = fit_water_plane(np.vstack(points))
     n = plane.normal
     print(f"water plane (base frame): z = {plane.z_mm:.1f} mm at ({plane.centroid[0]:.0f}, {plane.centroid[1]:.0f}); "

@@ -192,14 +192,15 @@ def board_texture(board: Board, px_per_mm: float, margin_squares: float = 1.0) -
     return cv2.copyMakeBorder(inner, m, m, m, m, cv2.BORDER_CONSTANT, value=255), m / px_per_mm
 
 
-class BoardRenderer:
-    """Renders a board seen by one camera (with distortion) at known poses. The camera's pixel
-    rays are computed once (supersampled `ss` x `ss` per pixel, then area-averaged)."""
+class PlaneRenderer:
+    """Renders a flat textured plane (a board, a marker) seen by one camera with distortion, at
+    known poses. Plane frame (mm): texture pixel (c, r) centre at ((c + 0.5) / px_per_mm -
+    margin_mm, (r + 0.5) / px_per_mm - margin_mm, 0). The camera's pixel rays are computed once
+    (supersampled `ss` x `ss` per pixel, then area-averaged)."""
 
-    def __init__(self, board: Board, cam: Camera, px_per_mm: float = 8.0, ss: int = 2) -> None:
-        self.board, self.cam, self.ss = board, cam, ss
-        self.texture, self.margin_mm = board_texture(board, px_per_mm)
-        self.px_per_mm = px_per_mm
+    def __init__(self, texture: np.ndarray, px_per_mm: float, margin_mm: float, cam: Camera, ss: int = 2) -> None:
+        self.texture, self.px_per_mm, self.margin_mm = texture, px_per_mm, margin_mm
+        self.cam, self.ss = cam, ss
         w, h = cam.size
         # hi-res pixel u' sits at low-res coordinate (u' - (ss-1)/2) / ss
         u, v = np.meshgrid((np.arange(w * ss) - (ss - 1) / 2) / ss, (np.arange(h * ss) - (ss - 1) / 2) / ss)
@@ -208,16 +209,18 @@ class BoardRenderer:
         xy = cv2.undistortPointsIter(uv, cam.K, cam.dist, None, None, crit).reshape(h * ss, w * ss, 2)
         self.rays = np.concatenate([xy, np.ones((h * ss, w * ss, 1))], axis=-1)  # (H, W, 3), z = 1
 
-    def render(self, R_cam_board: np.ndarray, t_cam_board: np.ndarray, background: int = 110,
-               rng: np.random.Generator | None = None, noise_sigma: float = 0.0) -> np.ndarray:
-        """BGR image of the board at pose X_cam = R · X_board + t (mm); grey `background`
-        elsewhere; optional Gaussian pixel noise (grey levels)."""
-        n = R_cam_board[:, 2]
+    def render(self, R_cam_plane: np.ndarray, t_cam_plane: np.ndarray, background: int = 110,
+               rng: np.random.Generator | None = None, noise_sigma: float = 0.0,
+               base: np.ndarray | None = None) -> np.ndarray:
+        """BGR image of the plane at pose X_cam = R · X_plane + t (mm): over `base` (a BGR image
+        of the camera's size, for several planes in one view) or over grey `background`;
+        optional Gaussian pixel noise (grey levels)."""
+        n = R_cam_plane[:, 2]
         denom = self.rays @ n
         with np.errstate(divide="ignore", invalid="ignore"):
-            s = float(n @ t_cam_board) / denom
-            X = self.rays * s[..., None] - t_cam_board
-            B = X @ R_cam_board  # board coords: R^T (X - t)
+            s = float(n @ t_cam_plane) / denom
+            X = self.rays * s[..., None] - t_cam_plane
+            B = X @ R_cam_plane  # plane coords: R^T (X - t)
         bad = ~(s > 0)
         mx = ((B[..., 0] + self.margin_mm) * self.px_per_mm - 0.5).astype(np.float32)
         my = ((B[..., 1] + self.margin_mm) * self.px_per_mm - 0.5).astype(np.float32)
@@ -226,10 +229,64 @@ class BoardRenderer:
                        borderValue=background)
         w, h = self.cam.size
         img = cv2.resize(hi, (w, h), interpolation=cv2.INTER_AREA).astype(np.float64)
+        if base is not None:
+            th, tw = self.texture.shape[:2]
+            inside = ((mx >= -0.5) & (my >= -0.5) & (mx <= tw - 0.5) & (my <= th - 0.5)).astype(np.float32)
+            alpha = cv2.resize(inside, (w, h), interpolation=cv2.INTER_AREA).astype(np.float64)
+            grey = cv2.cvtColor(base, cv2.COLOR_BGR2GRAY).astype(np.float64)
+            img = alpha * img + (1 - alpha) * grey
         if noise_sigma > 0:
             img += (rng or np.random.default_rng(0)).normal(0.0, noise_sigma, img.shape)
         img = np.clip(np.rint(img), 0, 255).astype(np.uint8)
         return cv2.cvtColor(img, cv2.COLOR_GRAY2BGR)
+
+
+class BoardRenderer(PlaneRenderer):
+    """A calibration board (`board_texture`) in the board frame of the module docstring."""
+
+    def __init__(self, board: Board, cam: Camera, px_per_mm: float = 8.0, ss: int = 2) -> None:
+        self.board = board
+        texture, margin_mm = board_texture(board, px_per_mm)
+        super().__init__(texture, px_per_mm, margin_mm, cam, ss)
+
+
+class MarkerRenderer(PlaneRenderer):
+    """One ArUco marker of `side_mm` with a white quiet zone, in the marker frame of
+    `marker_object_points`."""
+
+    def __init__(self, dictionary: str, marker_id: int, side_mm: float, cam: Camera,
+                 px_per_mm: float = 8.0, ss: int = 2) -> None:
+        d = cv2.aruco.getPredefinedDictionary(getattr(cv2.aruco, dictionary))
+        side_px = round(side_mm * px_per_mm)
+        img = cv2.aruco.generateImageMarker(d, marker_id, side_px)
+        m = round(0.25 * side_mm * px_per_mm)
+        super().__init__(cv2.copyMakeBorder(img, m, m, m, m, cv2.BORDER_CONSTANT, value=255),
+                         px_per_mm, m / px_per_mm, cam, ss)
+
+
+# ----------------------------------------------------------------------------- single markers
+
+
+def marker_object_points(side_mm: float) -> np.ndarray:
+    """(4, 3) corners of a square marker in ArUco's detection order (top-left, top-right,
+    bottom-right, bottom-left as printed) in the marker frame: origin at the top-left corner,
+    x along the top edge, y down the left edge, z = x × y (into the marker), mm."""
+    s = float(side_mm)
+    return np.array([[0.0, 0.0, 0.0], [s, 0.0, 0.0], [s, s, 0.0], [0.0, s, 0.0]])
+
+
+def detect_markers(image: np.ndarray, dictionary: str = DEFAULT_DICTIONARY) -> dict[int, np.ndarray]:
+    """ArUco markers in an image: {id: (4, 2) corners, px, sub-pixel} (cv2.aruco.ArucoDetector
+    with sub-pixel corner refinement)."""
+    if not hasattr(cv2.aruco, dictionary):
+        raise InputError(f"unknown ArUco dictionary '{dictionary}'")
+    params = cv2.aruco.DetectorParameters()
+    params.cornerRefinementMethod = cv2.aruco.CORNER_REFINE_SUBPIX
+    det = cv2.aruco.ArucoDetector(cv2.aruco.getPredefinedDictionary(getattr(cv2.aruco, dictionary)), params)
+    corners, ids, _ = det.detectMarkers(_gray(image))
+    if ids is None:
+        return {}
+    return {int(i): c.reshape(4, 2).astype(np.float64) for i, c in zip(ids.ravel(), corners)}
 
 
 def draw_detection(image: np.ndarray, det: BoardDetection | None, board: Board) -> np.ndarray:

@@ -18,7 +18,13 @@ import cv2
 import numpy as np
 
 from photoservo.errors import InputError
-from photoservo.vision.board import Board, BoardDetection, common_corners, match_order
+from photoservo.vision.board import (
+    Board,
+    BoardDetection,
+    common_corners,
+    marker_object_points,
+    match_order,
+)
 from photoservo.vision.rig import Camera, Rig
 
 MIN_STEREO_VIEWS = 4       # usable pairs needed for a stereo calibration
@@ -182,8 +188,14 @@ def calibrate_stereo(views: Sequence[StereoView], board: Board, size_left: tuple
 def board_pose(det: BoardDetection, board: Board, cam: Camera) -> tuple[np.ndarray, float]:
     """Pose of the board in a calibrated camera, T_cam_board (4x4, mm), by PnP (IPPE for a
     plane, then Levenberg-Marquardt refinement), and its RMS reprojection error (px)."""
-    P = board.object_points()[det.ids]
-    uv = det.image_points
+    return plane_pose(board.object_points()[det.ids], det.image_points, cam)
+
+
+def plane_pose(P: np.ndarray, uv: np.ndarray, cam: Camera) -> tuple[np.ndarray, float]:
+    """PnP of >= 4 coplanar points P (n, 3) (z = 0, mm) seen at uv (n, 2) px: T_cam_plane and
+    the RMS reprojection error (px)."""
+    P = np.ascontiguousarray(P, dtype=np.float64)
+    uv = np.ascontiguousarray(uv, dtype=np.float64)
     ok, rvec, tvec = cv2.solvePnP(P, uv, cam.K, cam.dist, flags=cv2.SOLVEPNP_IPPE)
     if not ok:
         ok, rvec, tvec = cv2.solvePnP(P, uv, cam.K, cam.dist, flags=cv2.SOLVEPNP_ITERATIVE)
@@ -321,6 +333,24 @@ def board_points_left(left: BoardDetection | None, right: BoardDetection | None,
         P = board.object_points()[left.ids]
         return P @ T[:3, :3].T + T[:3, 3]
     return np.zeros((0, 3))
+
+
+def marker_points_left(left: dict[int, np.ndarray], right: dict[int, np.ndarray] | None, side_mm: float,
+                       rig: Rig) -> tuple[np.ndarray, int, int]:
+    """Corners of single square markers in the left-camera frame (n, 3) mm: triangulated when
+    both cameras see a marker, else from the left camera's PnP of its 4 corners (needs the true
+    `side_mm`). Returns (points, markers triangulated, markers from PnP)."""
+    pts, n_tri, n_pnp = [], 0, 0
+    P = marker_object_points(side_mm)
+    for marker_id, uv_l in sorted(left.items()):
+        if right is not None and marker_id in right:
+            pts.append(triangulate(rig, uv_l, right[marker_id]))
+            n_tri += 1
+        else:
+            T, _ = plane_pose(P, uv_l, rig.left)
+            pts.append(P @ T[:3, :3].T + T[:3, 3])
+            n_pnp += 1
+    return (np.vstack(pts) if pts else np.zeros((0, 3))), n_tri, n_pnp
 
 
 @dataclass(frozen=True)
