@@ -258,6 +258,7 @@ def test_water_prints_height_and_updates_config(tmp_path, capsys):
                                "--charuco", "--update", str(cfg)], capsys)
     assert code == 0, err
     assert "(triangulated)" in text
+    assert "note: 'world.water_z_mm' is not a key of configs/default.toml" in text
     z = float(text.split("water_z_mm = ")[1].split()[0])
     assert z == pytest.approx(water_z, abs=2.0)
     doc = tomllib.loads(cfg.read_text())

@@ -39,6 +39,7 @@ from photoservo.fileio import read_image, write_image_atomic, write_text_atomic
 from photoservo.robot.link import Link, LinkError
 from photoservo.servo.cmd_config import add_config_options
 from photoservo.servo.config import load_config
+from photoservo.tomlconf import configs_dir, read_toml
 from photoservo.vision.board import (
     DEFAULT_DICTIONARY,
     Board,
@@ -578,6 +579,10 @@ def run_water(args: argparse.Namespace) -> int:
             raise InputError(f"{p}: cannot read ({e.strerror or e})") from None
         write_text_atomic(p, set_toml_key(text, args.key, plane.z_mm))
         print(f"set {args.key} = {plane.z_mm:.2f} in {p}")
+        section, _, key = args.key.rpartition(".")
+        if key not in read_toml(configs_dir() / "default.toml").get(section, {}):
+            print(f"note: '{args.key}' is not a key of configs/default.toml: `--config {p}` will reject it "
+                  "until the tracker's config has it (use --key to pick another)")
     return 0
 
 
