@@ -258,7 +258,10 @@ def test_water_prints_height_and_updates_config(tmp_path, capsys):
                                "--charuco", "--update", str(cfg)], capsys)
     assert code == 0, err
     assert "(triangulated)" in text
-    assert "note: 'world.water_z_mm' is not a key of configs/default.toml" in text
+    from photoservo.tomlconf import configs_dir, read_toml
+
+    known = "water_z_mm" in read_toml(configs_dir() / "default.toml").get("world", {})
+    assert ("note: 'world.water_z_mm' is not a key of configs/default.toml" in text) != known
     z = float(text.split("water_z_mm = ")[1].split()[0])
     assert z == pytest.approx(water_z, abs=2.0)
     doc = tomllib.loads(cfg.read_text())
