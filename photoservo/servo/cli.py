@@ -24,6 +24,7 @@ VERBS: dict[str, tuple[str, str]] = {
     "pa10-sim": ("photoservo.servo.cmd_pa10_sim", "PA-10 serial-bridge emulator on a pty (prints the device path)"),
     "move": ("photoservo.servo.cmd_move", "move the arm to joint angles (deg) or home through the bridge, jerk-limited"),
     "track": ("photoservo.servo.cmd_track", "track a floating creature and servo the arm over it (main job)"),
+    "replay": ("photoservo.servo.cmd_replay", "re-run a recording's tracker and control law with a changed config; compare"),
 }
 
 

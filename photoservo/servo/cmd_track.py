@@ -25,6 +25,7 @@ Examples:
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import math
 import sys
@@ -39,7 +40,8 @@ from photoservo.tomlconf import dump_config
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--sim", action="store_true", help="run on the built-in simulator (default without hardware)")
-    p.add_argument("--duration", type=float, default=20.0, metavar="S", help="session length (s, default 20)")
+    p.add_argument("--duration", type=float, default=None, metavar="S",
+                   help="session length (s, default 20; with --world-from the recorded run's)")
     p.add_argument("--no-motion", action="store_true", help="track without commanding the arm")
     p.add_argument("--collect", action="store_true", help="collect the target once the hold is steady")
     p.add_argument("--lockstep", action="store_true", help="simulation on its own clock (deterministic)")
@@ -52,7 +54,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     view = p.add_mutually_exclusive_group()
     view.add_argument("--view", action="store_true", help="spawn the Rerun viewer while recording")
     view.add_argument("--connect", metavar="URL", help="stream to a running Rerun viewer as well")
-    p.add_argument("--seed", type=int, default=0, help="tracker seed (default 0)")
+    p.add_argument("--seed", type=int, default=None, help="tracker seed (default 0; with --world-from the recorded one)")
+    p.add_argument("--world-from", metavar="REC.rrd",
+                   help="simulation: the world, config and seeds of a simulated recording, closed loop with "
+                        "the --config/--set changes; prints the comparison with the recorded run")
     p.add_argument("--json", action="store_true", help="print the session summary as JSON on stdout")
     add_config_options(p)
 
@@ -88,6 +93,12 @@ class _StatusLine:
 
 
 def run(args: argparse.Namespace) -> int:
+    if args.world_from:
+        from photoservo.servo.replay import track_world_from
+
+        return track_world_from(args, _run_sim)
+    args.duration = 20.0 if args.duration is None else args.duration
+    args.seed = 0 if args.seed is None else args.seed
     cfg = load_config(args.config, args.overrides)
     if args.duration <= 0:
         raise InputError(f"--duration {args.duration}: must be > 0 s")
@@ -140,6 +151,8 @@ def _run_sim(args, cfg) -> int:
     from photoservo.robot.link import Link
     from photoservo.servo.session import SimCameras, build_sim, run_lockstep, run_realtime
 
+    if args.lockstep:  # the recorded effective config then says how the run was clocked (replay reads it)
+        cfg = dataclasses.replace(cfg, sim=dataclasses.replace(cfg.sim, lockstep=True))
     sim = build_sim(cfg)
     status = _StatusLine()
     rec = _recorder(args, cfg)

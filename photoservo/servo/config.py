@@ -83,9 +83,14 @@ def parse_override(text: str) -> tuple[list[str], Any]:
     return path, value
 
 
-def load_config_dict(path: str | os.PathLike | None = None, overrides: Sequence[str] = ()) -> dict:
-    """Defaults <- user file <- overrides, as a raw dict (not yet validated against types)."""
+def load_config_dict(path: str | os.PathLike | None = None, overrides: Sequence[str] = (),
+                     recorded: tuple[str, dict] | None = None) -> dict:
+    """Defaults <- `recorded` <- user file <- overrides, as a raw dict (not yet validated against
+    types). `recorded` = (where it comes from, table): the effective config stored in a recording
+    (replay, `track --world-from`); keys it lacks keep their defaults."""
     doc = read_toml(configs_dir() / "default.toml")
+    if recorded is not None:
+        doc = _merge(doc, recorded[1], recorded[0])
     if path is not None:
         doc = _merge(doc, read_toml(Path(path)), str(path))
     for text in overrides:
@@ -101,8 +106,9 @@ def load_config_dict(path: str | os.PathLike | None = None, overrides: Sequence[
     return doc
 
 
-def load_config(path: str | os.PathLike | None = None, overrides: Sequence[str] = ()) -> Config:
-    """The effective, validated configuration."""
-    return build_dataclass(Config, load_config_dict(path, overrides), "")
+def load_config(path: str | os.PathLike | None = None, overrides: Sequence[str] = (),
+                recorded: tuple[str, dict] | None = None) -> Config:
+    """The effective, validated configuration (`recorded`: see load_config_dict)."""
+    return build_dataclass(Config, load_config_dict(path, overrides, recorded), "")
 
 

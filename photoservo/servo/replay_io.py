@@ -461,6 +461,8 @@ def run_metrics(rec: Recording) -> dict[str, float]:
                       position (base frame when the camera pose was logged) over consecutive
                       found frames: shake that a constant-velocity drift does not contribute
     ms_per_frame      (t_last - t_first) / (frames - 1) * 1000 on the loop clock
+    tracker_ms        mean hue + mean GA time per frame (timing/hue_ms, timing/ga_ms): the
+                      processing cost, which a replay changes while its frame times do not
     commanded_rad     joint-space path length of the commands, sum_k ||c[k] - c[k-1]||_2
     pos_err_mm        RMS ||p_est - p_true|| (base frame) over found frames with truth
     heading_err_deg   RMS heading difference (model x axis in the base xy plane, wrapped)
@@ -483,6 +485,10 @@ def run_metrics(rec: Recording) -> dict[str, float]:
     m["jitter_mm"] = float(np.sqrt(np.mean(np.square(d2)))) if d2 else nan
     ts = [f.t for f in rec.frames]
     m["ms_per_frame"] = (ts[-1] - ts[0]) / (len(ts) - 1) * 1000 if len(ts) > 1 else nan
+    if "hue" in rec.timings and "ga" in rec.timings:
+        m["tracker_ms"] = float(np.mean(rec.timings["hue"].values) + np.mean(rec.timings["ga"].values))
+    else:
+        m["tracker_ms"] = nan
     cmd = rec.arm.get("command")
     m["commanded_rad"] = (float(np.linalg.norm(np.diff(cmd.values, axis=0), axis=1).sum())
                           if cmd is not None and len(cmd.t) > 1 else nan)
@@ -516,6 +522,7 @@ METRICS: tuple[tuple[str, str, str], ...] = (
     ("lost_frames", "lost frames", "{:.0f}"),
     ("jitter_mm", "pose jitter (mm)", "{:.2f}"),
     ("ms_per_frame", "time per frame (ms)", "{:.1f}"),
+    ("tracker_ms", "tracker ms per frame", "{:.1f}"),
     ("commanded_rad", "commanded motion (rad)", "{:.3f}"),
     ("pos_err_mm", "position error (mm RMS)", "{:.2f}"),
     ("heading_err_deg", "heading error (deg RMS)", "{:.2f}"),

@@ -1,0 +1,67 @@
+"""photoservo replay REC.rrd [--config CFG.toml] [--set key=value ...] [--out NEW.rrd] [--view]
+                        [--fixed-generations] [--json]
+
+Re-runs a recorded session from its file alone (servo/replay.py): the recorded frames through
+the tracker with the recorded seed (deterministic: no time budget), the control law open loop on
+the recorded joint states, with the recorded config changed by --config/--set; writes a new,
+complete recording (default logs/<UTC time>_replay.rrd) and prints the two runs side by side.
+
+Servo gains change only the commands here (the arm is not moved); to see their effect on the
+run, re-run the same simulated world closed loop: `photoservo track --sim --world-from REC`.
+
+Examples:
+    photoservo replay logs/20261122T052106Z_track.rrd --set ga.population=60
+    photoservo replay run.rrd --set tracker.generations_per_frame=4 --out run_g4.rrd --view
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+
+from photoservo.servo.cmd_config import add_config_options
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("recording", metavar="REC.rrd", help="a lossless or PNG recording (or its segments' base path)")
+    p.add_argument("--out", metavar="NEW.rrd", help="the replay's recording (default logs/<UTC time>_replay.rrd)")
+    p.add_argument("--view", action="store_true", help="spawn the Rerun viewer while writing the replay")
+    p.add_argument("--fixed-generations", action="store_true",
+                   help="run [tracker] generations_per_frame on every tracking frame, even for a real-time "
+                        "recording (default there: each frame's recorded count)")
+    p.add_argument("--json", action="store_true", help="print the comparison as JSON on stdout")
+    add_config_options(p)
+
+
+def run(args: argparse.Namespace) -> int:
+    from photoservo.servo.replay import load_replay, replay
+
+    setup = load_replay(args.recording, args.config, args.overrides, args.fixed_generations)
+    n = len(setup.recording.frames)
+    quiet = args.json
+    if not quiet:
+        print(f"replaying {n} frames of {args.recording} (tracker seed {setup.seed}; "
+              f"{setup.generations_note})", file=sys.stderr)
+    step = max(1, n // 10)
+
+    def progress(k: int, total: int) -> None:
+        if not quiet and (k % step == 0 or k == total):
+            print(f"  frame {k}/{total}", file=sys.stderr, flush=True)
+
+    res = replay(setup, args.out, view=args.view, progress=progress)
+    if args.json:
+        rows = {r.key: {"recorded": _num(r.a), "replay": _num(r.b)} for r in res.comparison.rows}
+        print(json.dumps({"recording": str(setup.path), "replay": str(res.out_path),
+                          "frames": len(res.frames), "seconds": res.seconds, "fps": res.fps,
+                          "generations": setup.generations_note, "table": rows}))
+    else:
+        print(res.comparison)
+        print(f"replayed {len(res.frames)} frames in {res.seconds:.1f} s ({res.fps:.2f} frames/s); "
+              f"recording: {res.out_path}")
+    return 0
+
+
+def _num(v: float) -> float | None:
+    return None if math.isnan(v) else v

@@ -1,0 +1,393 @@
+"""Replay (issue 6): re-run a recorded session's estimator and control law from its `.rrd` alone,
+with a changed config, and compare the two runs; and the same simulated world in closed loop
+(`photoservo track --sim --world-from REC`).
+
+Replay (`replay`), from the file alone:
+  * setup: the recorded rig (TOML), the photo-model (bit-exact arrays), the tracker seed and the
+    effective config; the config replay runs with is defaults <- recorded <- --config <- --set
+    (`load_replay`).
+  * vision: every recorded stereo frame (read back exactly: lossless/PNG recordings only; a
+    preview-mode JPEG recording is refused) goes through a fresh `vision.tracker.Tracker` with
+    the recorded seed, at its recorded capture time and left-camera pose T_base_left, with no
+    time budget. Generation counts: a lockstep recording (config sim.lockstep = true) ran the
+    fixed [tracker] generations_per_frame, and so does its replay. A real-time run stopped
+    frames by its time budget; its replay runs each tracking frame for the generation count
+    recorded for that frame ("recorded counts"), unless the replay changes
+    tracker.generations_per_frame or asks for `fixed_generations`. Either way the replay is
+    deterministic: same recording + same config = same result, frame for frame.
+  * control, OPEN LOOP: the recorded joint states (arm/q, linearly interpolated between its
+    samples; dq by finite differences) drive a fresh `session.Controller` at the control rate
+    ([motion] rate_hz) with the replayed track, which becomes available at capture time +
+    [sim] capture_latency_s, as in the lockstep session. What it would have commanded is
+    logged as arm/setpoint and arm/command (setpoint.dq, as the session logs it) beside the
+    recorded q. The arm does not move: servo gains change the commands, not the frames, so
+    tune gains closed loop with `track --sim --world-from REC`.
+  * output: a complete recording (static setup with the replay's effective config and the
+    same seed, every frame again, estimates, truth copied, arm series, timings, events) that
+    can itself be replayed, and the side-by-side table (`replay_io.compare_runs`).
+
+World from a recording (`world_from`): a simulated recording's effective config (its [sim]
+section: seed, target motion, cameras) and tracker seed rebuilt, the user's --config/--set on
+top (new gains), and the session re-run closed loop; `track` then prints the comparison table.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import sys
+import time
+import tomllib
+import warnings
+from collections.abc import Callable, Iterator, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from photoservo.errors import InputError
+from photoservo.servo.config import Config, load_config
+from photoservo.servo.replay_io import (
+    Comparison,
+    Frame,
+    Recording,
+    compare_runs,
+    iter_frames,
+    read_recording,
+)
+from photoservo.tomlconf import dump_config
+
+# ------------------------------------------------------------------------------------------
+# the setup from the file
+
+
+@dataclass
+class ReplaySetup:
+    """Everything a replay starts from, rebuilt from a recording (+ config changes)."""
+
+    path: Path
+    recording: Recording
+    recorded_cfg: Config          # the config the recorded run ran with
+    cfg: Config                   # recorded <- --config <- --set: what the replay runs with
+    rig: Any                      # vision.rig.Rig with [hand_eye]
+    model: Any                    # vision.photo_model.PhotoModel (bit-exact)
+    photo: np.ndarray | None
+    seed: int                     # the tracker seed
+    recorded_generations: bool    # run tracking frames for their recorded generation counts
+
+    @property
+    def generations_note(self) -> str:
+        n = self.cfg.tracker.generations_per_frame
+        if self.recorded_generations:
+            return ("recorded generation counts per tracking frame, at most "
+                    f"{n} (a real-time run: recorded sim.lockstep = false; its time budget may have "
+                    "stopped frames early)")
+        return f"fixed {n} generations per tracking frame (no time budget)"
+
+
+def read_checked(path: str | Path) -> Recording:
+    """`read_recording` with one-line errors: a missing, unreadable or non-photoservo file is an
+    InputError; a preview-mode (lossy JPEG) recording cannot be replayed."""
+    p = Path(path)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        try:
+            rec = read_recording(p)
+        except InputError:
+            raise
+        except (OSError, ValueError, RuntimeError) as e:
+            raise InputError(f"{p}: not a readable recording ({_first_line(e)})") from None
+    if rec.incomplete and not rec.frames:
+        why = _first_line(caught[0].message) if caught else "cut short"
+        raise InputError(f"{p}: not a readable recording ({why})")
+    if not rec.setup.replayable:
+        raise InputError(f"{p}: a preview-mode recording (lossy JPEG frames, hue changed) cannot be replayed")
+    return rec
+
+
+def _first_line(x: Any) -> str:
+    s = str(x).strip()
+    return s.splitlines()[0] if s else type(x).__name__
+
+
+def recorded_config(rec: Recording, path: str | Path, config_path: str | Path | None = None,
+                    overrides: Sequence[str] = ()) -> tuple[Config, Config]:
+    """(the recorded run's config, the config to run with = defaults <- recorded <- file <-
+    overrides). Keys the recording lacks (older versions) keep today's defaults."""
+    text = rec.setup.config_toml
+    if text is None:
+        raise InputError(f"{path}: the recording has no effective config (setup/config)")
+    try:
+        table = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as e:
+        raise InputError(f"{path}: the recorded config is not valid TOML ({e})") from None
+    where = f"{path} (recorded config)"
+    return load_config(recorded=(where, table)), load_config(config_path, overrides, recorded=(where, table))
+
+
+def tracker_seed(rec: Recording) -> int:
+    """The tracker seed as `track` records it ({"tracker": s, "sim": ...}) or a plain int."""
+    s = rec.setup.seed
+    if isinstance(s, dict):
+        s = s.get("tracker", 0)
+    return int(s or 0)
+
+
+def load_replay(path: str | Path, config_path: str | Path | None = None, overrides: Sequence[str] = (),
+                fixed_generations: bool = False) -> ReplaySetup:
+    """Read a recording and rebuild rig, photo-model, config and seed for `replay`."""
+    p = Path(path)
+    rec = read_checked(p)
+    rec_cfg, cfg = recorded_config(rec, p, config_path, overrides)
+    rig = rec.setup.rig()
+    if rig is None or rig.T_flange_left() is None:
+        raise InputError(f"{p}: the recording has no rig with a hand-eye transform: nothing to replay")
+    if rec.setup.model is None:
+        raise InputError(f"{p}: the recording has no photo-model: nothing to replay")
+    if not rec.frames:
+        raise InputError(f"{p}: the recording holds no frames")
+    budgeted = not rec_cfg.sim.lockstep
+    same_n = cfg.tracker.generations_per_frame == rec_cfg.tracker.generations_per_frame
+    return ReplaySetup(p, rec, rec_cfg, cfg, rig, rec.setup.model, rec.setup.photo_bgr, tracker_seed(rec),
+                       recorded_generations=budgeted and same_n and not fixed_generations)
+
+
+# ------------------------------------------------------------------------------------------
+# the replay
+
+
+@dataclass(frozen=True)
+class FrameResult:
+    """The replayed tracker's answer for one recorded frame (numbers only, for comparisons)."""
+
+    frame: int
+    status: str
+    found: bool
+    fitness: float
+    generations: int
+    position_mm: tuple[float, ...] | None   # measured model position in the left camera
+    alpha: float | None
+
+
+@dataclass
+class ReplayResult:
+    setup: ReplaySetup
+    out_path: Path
+    frames: list[FrameResult]
+    commands: np.ndarray          # (N, 7) open-loop setpoint.dq at the logged control ticks
+    seconds: float                # wall time of the replay (tracker + control + recording)
+    comparison: Comparison | None = None
+    events: list[tuple[float, str]] = field(default_factory=list)
+
+    @property
+    def fps(self) -> float:
+        return len(self.frames) / self.seconds if self.seconds > 0 else float("nan")
+
+
+class RecordedArm:
+    """The recorded joint states as a function of time: q (rad) linearly interpolated between
+    the arm/q samples, dq (rad/s) from their finite differences."""
+
+    def __init__(self, t: np.ndarray, q: np.ndarray) -> None:
+        t, idx = np.unique(np.asarray(t, dtype=np.float64), return_index=True)
+        self.t, self.q = t, np.asarray(q, dtype=np.float64)[idx]
+        self.dq = (np.gradient(self.q, self.t, axis=0) if len(self.t) > 1
+                   else np.zeros_like(self.q))
+
+    def at(self, t: float) -> tuple[np.ndarray, np.ndarray]:
+        q = np.array([np.interp(t, self.t, self.q[:, j]) for j in range(self.q.shape[1])])
+        dq = np.array([np.interp(t, self.t, self.dq[:, j]) for j in range(self.dq.shape[1])])
+        return q, dq
+
+
+def _frames_with_meta(setup: ReplaySetup) -> Iterator[tuple[Frame, Any]]:
+    """The recorded frames (images streamed from the file) with their metadata, in order."""
+    meta = {m.index: m for m in setup.recording.frames}
+    for fr in iter_frames(setup.path):
+        m = meta.get(fr.index)
+        if m is None:
+            continue
+        if m.T_base_left is None:
+            raise InputError(f"{setup.path}: frame {fr.index} has no camera pose (T_base_left): cannot replay")
+        yield fr, m
+
+
+def replay(setup: ReplaySetup, out: str | Path | None = None, *, view: bool = False,
+           progress: Callable[[int, int], None] | None = None) -> ReplayResult:
+    """Re-run the tracker on every recorded frame and the control law open loop on the recorded
+    joint states (module docstring); write the new recording to `out` (None: the [recording]
+    default path) and compare it with the recorded run."""
+    from photoservo.robot import pa10
+    from photoservo.servo import session as S
+    from photoservo.servo.motion import Motion
+    from photoservo.servo.recording import Recorder
+    from photoservo.vision.rig import dump_rig
+    from photoservo.vision.tracker import Tracker
+
+    cfg, rec = setup.cfg, setup.recording
+    rig = setup.rig
+    T_fl, centre = rig.T_flange_left(), S.left_centre(rig)
+    tracker = Tracker(setup.model, rig, cfg.tracker, cfg.ga, cfg.estimator, cfg.fitness, setup.seed)
+    tracker.use_time_budget = False
+    base_p = cfg.tracker
+    rec_gens = {e.frame: e.generations for e in rec.estimates}
+    ctrl = S.Controller(cfg.servo, Motion(cfg.motion, pa10.load_limits()), T_fl, centre)
+    truth = {tr.frame: tr for tr in rec.truth}
+    q_series = rec.arm.get("q")
+    arm = RecordedArm(q_series.t, q_series.values) if q_series is not None and len(q_series.t) else None
+    dt = 1.0 / cfg.motion.rate_hz
+    latency = cfg.sim.capture_latency_s
+    n_total = len(rec.frames)
+    sc = S.Scores()
+    results: list[FrameResult] = []
+    commands: list[np.ndarray] = []
+    recorder = Recorder.from_config(cfg.recording, "replay", out, view=view)
+    t_start = time.perf_counter()
+    try:
+        recorder.log_static_setup(dump_rig(rig), setup.photo, setup.model, dump_config(cfg),
+                                  rec.setup.seed, rec.setup.versions or None)
+        recorder.event(rec.frames[0].t, f"replay of {setup.path.name}: {setup.generations_note}")
+        frames = _frames_with_meta(setup)
+        pending: tuple[Frame, Any] | None = next(frames, None)
+        track = None
+        prev_status = None
+        n_events = 0
+
+        def deliver(upto: float) -> None:
+            nonlocal pending, track, prev_status
+            while pending is not None and (pending[1].capture_times or (pending[1].t,))[0] + latency <= upto + 1e-9:
+                fr, m = pending
+                t_l, t_r = m.capture_times or (m.t, m.t)
+                n_rec = rec_gens.get(fr.index)
+                capped = (setup.recorded_generations and tracker.search is not None and n_rec is not None
+                          and 1 <= n_rec < base_p.generations_per_frame)
+                tracker.p = dataclasses.replace(base_p, generations_per_frame=n_rec) if capped else base_p
+                sfr = S.Frame(fr.index, t_l, t_r, t_l + latency, fr.left, fr.right, m.T_base_left)
+                track = S._vision_step(sfr, tracker, cfg, sc, recorder, None)
+                tr = truth.get(fr.index)
+                if tr is not None:
+                    recorder.log_truth(fr.index, t_l, tr.T_base_target,
+                                       None if tr.size_mm is None else tuple(tr.size_mm))
+                results.append(FrameResult(
+                    fr.index, track.status, bool(track.found), float(track.fitness), int(track.generations),
+                    None if track.t_left is None else tuple(float(x) for x in track.t_left),
+                    None if track.alpha_measured is None else float(track.alpha_measured)))
+                if track.status != prev_status:
+                    ctrl.events.append((t_l + latency, f"track {track.status}"))
+                    prev_status = track.status
+                if progress is not None:
+                    progress(len(results), n_total)
+                pending = next(frames, None)
+
+        if arm is not None:
+            i0 = math.ceil(arm.t[0] / dt - 1e-6)
+            i1 = math.floor(arm.t[-1] / dt + 1e-6)
+            for i in range(i0, i1 + 1):
+                now = i * dt
+                deliver(now)
+                q, dq = arm.at(now)
+                info = ctrl.step(now, q, dq, track)
+                while n_events < len(ctrl.events):
+                    recorder.event(*ctrl.events[n_events])
+                    n_events += 1
+                if (i - i0) % 5 == 0:   # the session logs every 5th control period
+                    recorder.log_arm(now, q, info.setpoint.q, info.setpoint.dq)
+                    commands.append(np.array(info.setpoint.dq))
+                    if info.T_base_cam_des is not None:
+                        recorder.log_desired(now, info.T_base_cam_des)
+        deliver(math.inf)   # frames after the last arm sample (or no arm series at all)
+        while n_events < len(ctrl.events):
+            recorder.event(*ctrl.events[n_events])
+            n_events += 1
+    finally:
+        recorder.close()
+    seconds = time.perf_counter() - t_start
+    out_path = recorder.path
+    result = ReplayResult(setup, out_path, results, np.array(commands).reshape(-1, 7), seconds,
+                          events=list(ctrl.events))
+    result.comparison = compare_runs(rec, read_recording(out_path), "recorded", "replay")
+    return result
+
+
+# ------------------------------------------------------------------------------------------
+# the same world, closed loop
+
+
+@dataclass
+class WorldFrom:
+    """A simulated recording's world for `track --sim --world-from REC`."""
+
+    path: Path
+    recording: Recording
+    cfg: Config           # recorded <- --config <- --set
+    seed: int             # tracker seed (recorded unless given)
+    duration_s: float     # the recorded run's length (from its arm samples)
+    changed_sim_keys: list[str]
+
+
+def world_from(path: str | Path, config_path: str | Path | None = None, overrides: Sequence[str] = (),
+               seed: int | None = None) -> WorldFrom:
+    """Rebuild the simulated world of a recording: its effective config (the [sim] section:
+    seed, target motion, camera timing) with --config/--set on top, and its tracker seed."""
+    p = Path(path)
+    with warnings.catch_warnings(record=True):
+        warnings.simplefilter("always")
+        try:
+            rec = read_recording(p)
+        except InputError:
+            raise
+        except (OSError, ValueError, RuntimeError) as e:
+            raise InputError(f"{p}: not a readable recording ({_first_line(e)})") from None
+    if not rec.truth:
+        raise InputError(f"{p}: not a simulated recording (no ground truth): --world-from needs one")
+    rec_cfg, cfg = recorded_config(rec, p, config_path, overrides)
+    changed = [f.name for f in dataclasses.fields(cfg.sim)
+               if getattr(cfg.sim, f.name) != getattr(rec_cfg.sim, f.name)]
+    q = rec.arm.get("q")
+    if q is not None and len(q.t) > 1:
+        duration = float(q.t[-1] + np.median(np.diff(q.t)))
+    else:
+        duration = float(rec.frames[-1].t + 1.0 / rec_cfg.sim.camera_fps) if rec.frames else 0.0
+    return WorldFrom(p, rec, cfg, tracker_seed(rec) if seed is None else seed, duration, changed)
+
+
+def print_comparison(comparison: Comparison, file: Any = None) -> None:
+    print(str(comparison), file=file or sys.stdout)
+
+
+def track_world_from(args: Any, run_sim: Callable[[Any, Config], int]) -> int:
+    """`photoservo track --sim --world-from REC` (cmd_track calls this with its `_run_sim`):
+    the recorded world with the new config, closed loop, then the comparison table. The run is
+    recorded as usual (to a temporary file with --no-record, for the table)."""
+    import tempfile
+
+    from photoservo.servo.recording import default_path
+
+    if args.port:
+        raise InputError("--world-from runs the simulator: it cannot be combined with --port")
+    w = world_from(args.world_from, args.config, args.overrides, args.seed)
+    if w.cfg.cameras.kind != "none":
+        raise InputError("--world-from runs the simulator: config key 'cameras.kind' must be \"none\"")
+    if args.duration is None:
+        args.duration = w.duration_s
+    if args.duration <= 0:
+        raise InputError(f"--duration {args.duration}: must be > 0 s")
+    args.seed = w.seed
+    out = sys.stderr if args.json else sys.stdout
+    print(f"world from {w.path}: [sim] seed {w.cfg.sim.seed}, tracker seed {w.seed}, {args.duration:.2f} s"
+          + (f"; [sim] changed by you: {', '.join(w.changed_sim_keys)}" if w.changed_sim_keys else ""),
+          file=sys.stderr)
+    tmp = None
+    if args.no_record:
+        tmp = tempfile.TemporaryDirectory(prefix="photoservo-world-from-")
+        args.no_record, args.record = False, str(Path(tmp.name) / "run.rrd")
+    elif args.record is None:
+        args.record = str(default_path("track", w.cfg.recording.dir))
+    try:
+        code = run_sim(args, w.cfg)
+        print(compare_runs(w.recording, args.record, "recorded", "this run"), file=out)
+    finally:
+        if tmp is not None:
+            tmp.cleanup()
+    return code

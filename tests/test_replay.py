@@ -1,0 +1,180 @@
+"""Replay (issue 6): a recording re-run from its file alone reproduces the recorded lockstep run,
+is deterministic, writes a recording that replays again, follows config changes and recorded
+generation counts; `track --world-from` rebuilds the same simulated world; bad files are
+one-line errors."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import tomllib
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from photoservo.errors import InputError
+from photoservo.servo.cli import main
+from photoservo.servo.config import load_config
+from photoservo.servo.recording import Recorder, verify_rrd
+from photoservo.servo.replay import load_replay, replay
+from photoservo.servo.replay_io import iter_frames, read_recording
+from photoservo.tomlconf import dump_config
+
+SHORT = ["--sim", "--lockstep", "--duration", "1.2", "--set", "sim.camera_fps=5"]
+
+
+@pytest.fixture(scope="module")
+def recorded(tmp_path_factory) -> Path:
+    """A real `track --sim --lockstep` recording: 1.2 s at 5 fps (6 frames), tracker seed 3."""
+    path = tmp_path_factory.mktemp("rec") / "run.rrd"
+    assert main(["track", *SHORT, "--seed", "3", "--record", str(path)]) == 0
+    return path
+
+
+def _est(e) -> tuple:
+    return (e.frame, e.found, e.fitness, e.generations,
+            None if e.position_mm is None else tuple(e.position_mm))
+
+
+def test_replay_reproduces_the_lockstep_run_and_is_deterministic(recorded: Path, tmp_path: Path):
+    setup = load_replay(recorded)
+    assert setup.seed == 3 and setup.cfg.sim.lockstep and not setup.recorded_generations
+    assert "fixed 8 generations" in setup.generations_note
+    r1 = replay(setup, tmp_path / "r1.rrd")
+    r2 = replay(load_replay(recorded), tmp_path / "r2.rrd")
+    assert len(r1.frames) == 6 and r1.frames == r2.frames          # frame for frame
+    assert r1.commands.shape[0] > 10 and np.array_equal(r1.commands, r2.commands)
+    # the same frames, seed and generations as the recorded run: the same estimates, bit for bit
+    a, b = read_recording(recorded), read_recording(r1.out_path)
+    assert [_est(e) for e in a.estimates] == [_est(e) for e in b.estimates]
+    assert a.estimates[1].found
+    # open-loop commands on the recorded joint states: close to what the closed loop commanded
+    ca, cb = a.arm["command"].values, b.arm["command"].values
+    assert ca.shape == cb.shape and np.abs(ca - cb).max() < 0.01 * max(1e-3, np.abs(ca).max())
+    assert np.abs(a.arm["q"].values - b.arm["q"].values).max() < 1e-9
+    for key in ("mean_fitness", "found_ratio", "jitter_mm", "pos_err_mm", "size_err_mm"):
+        assert r1.comparison.row(key).delta == 0.0, key
+    # the replay's recording is complete (verifies) and replays itself to the same result
+    assert all(verify_rrd(f)[0] for f in b.files)
+    assert b.setup.run["verb"] == "replay" and b.setup.seed == a.setup.seed and len(b.truth) == 6
+    r3 = replay(load_replay(r1.out_path), tmp_path / "r3.rrd")
+    assert r3.frames == r1.frames
+    fa, fb = next(iter_frames(recorded)), next(iter_frames(r1.out_path))
+    assert np.array_equal(fa.left, fb.left) and np.array_equal(fa.right, fb.right)
+
+
+def test_changed_ga_setting_changes_the_table(recorded: Path, tmp_path: Path, capsys):
+    out = tmp_path / "ga.rrd"
+    rc = main(["replay", str(recorded), "--set", "tracker.generations_per_frame=1",
+               "--set", "ga.population=12", "--out", str(out), "--json"])
+    assert rc == 0
+    doc = json.loads(capsys.readouterr().out)
+    t = doc["table"]
+    assert doc["frames"] == 6 and doc["fps"] > 0 and doc["replay"] == str(out)
+    assert t["mean_fitness"]["replay"] != t["mean_fitness"]["recorded"]
+    assert t["jitter_mm"]["replay"] != t["jitter_mm"]["recorded"]
+    assert t["frames"]["replay"] == t["frames"]["recorded"] == 6
+    assert t["pos_err_mm"]["replay"] is not None           # truth carried over
+    cfg = tomllib.loads(read_recording(out).setup.config_toml)
+    assert cfg["tracker"]["generations_per_frame"] == 1 and cfg["ga"]["population"] == 12
+    assert all(e.generations == 1 for e in read_recording(out).estimates[1:])
+    # the text table
+    assert main(["replay", str(recorded), "--set", "tracker.generations_per_frame=1",
+                 "--set", "ga.population=12", "--out", str(tmp_path / "ga2.rrd")]) == 0
+    text = capsys.readouterr().out
+    assert "recorded" in text and "replay" in text and "mean fitness" in text and "frames/s" in text
+
+
+def _relog(src: Path, dst: Path, cfg_text: str, generations: int) -> None:
+    """A copy of `src` made with the Recorder: same setup and frames, another config, and the
+    given generation count logged for every tracking frame (as a time-budgeted run would)."""
+    a = read_recording(src)
+    with Recorder.open(dst, "track") as rec:
+        s = a.setup
+        rec.log_static_setup(s.rig_toml, s.photo_bgr, s.model, cfg_text, s.seed)
+        for fr, m, e in zip(iter_frames(src), a.frames, a.estimates):
+            rec.log_frame(fr.index, m.t, fr.left, fr.right, T_base_left=m.T_base_left,
+                          capture_times=m.capture_times)
+            rec.log_estimate(fr.index, m.t, found=e.found, fitness=e.fitness,
+                             generations=e.generations if fr.index == 0 else generations,
+                             T_base_left=m.T_base_left)
+        for t, q in zip(a.arm["q"].t, a.arm["q"].values):
+            rec.log_arm(t, q)
+
+
+def test_real_time_recording_replays_with_its_recorded_generation_counts(recorded: Path, tmp_path: Path):
+    cfg = load_config(recorded=("test", tomllib.loads(read_recording(recorded).setup.config_toml)))
+    cfg = dataclasses.replace(cfg, sim=dataclasses.replace(cfg.sim, lockstep=False))
+    rt = tmp_path / "rt.rrd"
+    _relog(recorded, rt, dump_config(cfg), generations=3)
+    setup = load_replay(rt)
+    assert setup.recorded_generations and "recorded generation counts" in setup.generations_note
+    res = replay(setup, tmp_path / "a.rrd")
+    assert res.frames[0].generations > 8                      # acquisition: the estimator's own
+    assert [f.generations for f in res.frames[1:]] == [3] * 5
+    fixed = replay(load_replay(rt, fixed_generations=True), tmp_path / "b.rrd")
+    assert [f.generations for f in fixed.frames[1:]] == [8] * 5
+    assert fixed.frames[1].fitness != res.frames[1].fitness
+    # changing generations_per_frame overrides the recorded counts
+    assert not load_replay(rt, overrides=["tracker.generations_per_frame=5"]).recorded_generations
+
+
+def test_world_from_rebuilds_the_same_world(recorded: Path, tmp_path: Path, capsys):
+    same, gains = tmp_path / "same.rrd", tmp_path / "gains.rrd"
+    # no --duration, --seed, --set sim.*: all from the recording
+    assert main(["track", "--sim", "--world-from", str(recorded), "--record", str(same)]) == 0
+    out = capsys.readouterr().out
+    assert "recorded" in out and "this run" in out and "position error" in out
+    a, b = read_recording(recorded), read_recording(same)
+    assert [_est(e) for e in a.estimates] == [_est(e) for e in b.estimates]   # deterministic
+    assert np.array_equal(a.arm["command"].values, b.arm["command"].values)
+    assert main(["track", "--sim", "--world-from", str(recorded), "--record", str(gains),
+                 "--set", "servo.k_position=0.3"]) == 0
+    assert "this run" in capsys.readouterr().out
+    c = read_recording(gains)
+    assert len(c.truth) == len(a.truth)
+    for x, y in zip(a.truth, c.truth):   # the same target motion (the world) ...
+        assert np.array_equal(x.T_base_target, y.T_base_target)
+    assert not np.array_equal(a.arm["command"].values, c.arm["command"].values)   # ... other gains
+    assert tomllib.loads(c.setup.config_toml)["servo"]["k_position"] == 0.3
+
+
+def test_world_from_refuses_a_recording_without_truth(tmp_path: Path, capsys):
+    p = tmp_path / "move.rrd"
+    with Recorder.open(p, "move") as rec:
+        rec.log_arm(0.0, np.zeros(7))
+    assert main(["track", "--sim", "--world-from", str(p), "--no-record"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "no ground truth" in err[0]
+
+
+def _one_line_error(argv: list[str], capsys, *needles: str) -> None:
+    assert main(argv) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1, err
+    for n in needles:
+        assert n in err[0], err[0]
+
+
+def test_bad_recordings_are_one_line_errors(recorded: Path, tmp_path: Path, capsys):
+    _one_line_error(["replay", str(tmp_path / "nope.rrd")], capsys, "nope.rrd", "not found")
+    junk = tmp_path / "junk.rrd"
+    junk.write_bytes(b"this is not a recording" * 100)
+    _one_line_error(["replay", str(junk)], capsys, "junk.rrd")
+    preview = tmp_path / "preview.rrd"
+    a = read_recording(recorded)
+    with pytest.warns(UserWarning, match="CANNOT be replayed"):
+        rec = Recorder.open(preview, "track", mode="preview")
+    with rec:
+        rec.log_static_setup(a.setup.rig_toml, None, a.setup.model, a.setup.config_toml, 0)
+        fr = next(iter_frames(recorded))
+        rec.log_frame(0, 0.0, fr.left, fr.right, T_base_left=a.frames[0].T_base_left)
+    _one_line_error(["replay", str(preview)], capsys, "preview", "cannot be replayed")
+    bare = tmp_path / "bare.rrd"
+    with Recorder.open(bare, "move") as rec:
+        rec.log_arm(0.0, np.zeros(7))
+    _one_line_error(["replay", str(bare)], capsys, "bare.rrd", "no effective config")
+    _one_line_error(["replay", str(recorded), "--set", "ga.nope=1"], capsys, "ga.nope")
+    with pytest.raises(InputError, match="preview"):
+        load_replay(preview)
