@@ -12,7 +12,7 @@ from photoservo.robot import protocol as P
 from photoservo.servo.cli import main
 from photoservo.servo.config import load_config
 from photoservo.servo.motion import Motion
-from photoservo.servo.session import Controller, left_centre
+from photoservo.servo.session import Controller, build_sim, left_centre, run_lockstep
 from photoservo.servo.world import LockstepArm, TargetMotion, sim_hand_eye
 from photoservo.vision.synthetic import synthetic_rig
 from photoservo.vision.tracker import Track
@@ -111,3 +111,60 @@ def test_track_refuses_rig_without_hand_eye(tmp_path, capsys):
 def test_track_rejects_bad_duration(capsys):
     assert main(["track", "--sim", "--duration", "-1", "--no-record"]) == 2
     assert "--duration" in capsys.readouterr().err
+
+
+# ----------------------------------------------------------------------------- acceptance (issue 5)
+
+ACCEPTANCE = [  # the issue's scene: drift 30 mm/s, heave +-20 mm / 4 s, roll and pitch +-5 deg / 3 s,
+    "sim.drift_mm_s=[0.0, 30.0]", "sim.heave_mm=20.0", "sim.heave_period_s=4.0",  # arm 150 mm, 10 deg off
+    "sim.roll_deg=5.0", "sim.roll_period_s=3.0", "sim.pitch_deg=5.0", "sim.pitch_period_s=3.0",
+    "sim.start_offset_mm=150.0", "sim.start_yaw_deg=10.0",
+]
+
+
+def test_acceptance_hold_then_collect_on_the_simulators_clock():
+    # hold_time_s = 5: the descent starts after ~8 s, so 5 s.. is scored while holding
+    cfg = load_config(overrides=ACCEPTANCE + ["servo.hold_time_s=5.0", "servo.collect_speed_mm_s=150.0"])
+    sc = run_lockstep(cfg, 14.0, collect=True, seed=0, settle_s=5.0)
+    s = sc.summary()
+    assert s["lost_events"] == 0 and s["found_ratio"] == 1.0, s
+    assert len(sc.err_sq) > 250 * 2  # at least 2 s of holding scored
+    assert s["rms_position_error_mm"] <= 10.0, s
+    assert s["rms_yaw_error_deg"] <= 3.0, s
+    assert s["collected"], s
+    assert not s["faults"], s
+
+
+def test_distractor_in_view_never_draws_the_arm():
+    cfg = load_config(overrides=ACCEPTANCE + ["sim.distractor=true"])
+    sc = run_lockstep(cfg, 6.0, seed=0, settle_s=3.0)
+    s = sc.summary()
+    assert s["lost_events"] == 0, s
+    # the rig centre stays over the target, never over the look-alike 260 mm away
+    assert s["distractor_min_mm"] > 150.0, s
+    assert s["rms_position_error_mm"] <= 15.0, s
+
+
+def test_realtime_session_over_a_real_pty_stops_and_disables_the_arm():
+    from photoservo.robot.emulator import Emulator
+    from photoservo.robot.link import Link
+    from photoservo.servo.session import SimCameras, run_realtime
+
+    cfg = load_config(overrides=["sim.camera_fps=10.0"])
+    sim = build_sim(cfg)
+    emu = Emulator(cfg.emulator, sim.limits, q0=sim.q0)
+    path = emu.start()
+    try:
+        with Link(path, cfg.link) as link:
+            import time
+
+            t0 = time.monotonic()
+            cams = SimCameras(sim.scene, emu, sim.rig.T_flange_left(), cfg.sim.camera_fps, t0, cfg.sim.lr_skew_s)
+            sc = run_realtime(cfg, 4.0, arm=link, cameras=cams, model=sim.scene.model, rig=sim.rig,
+                              scene=sim.scene, t0=t0)
+            st = link.wait_state()  # a report sent after the session ended
+        assert sc.frames >= 3 and not sc.faults, sc.summary()
+        assert not st.servo_on and not st.moving  # controlled stop, then servo off
+        assert len(sc.timings_ms["control_late"]) > 250  # the control thread ran at its rate
+    finally:
+        emu.stop()
