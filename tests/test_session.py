@@ -150,7 +150,9 @@ def test_realtime_session_over_a_real_pty_stops_and_disables_the_arm():
     from photoservo.robot.link import Link
     from photoservo.servo.session import SimCameras, run_realtime
 
-    cfg = load_config(overrides=["sim.camera_fps=10.0"])
+    # the shared test machine can stall a thread for a few hundred ms: allow the link 1 s of
+    # silence (default 0.25 s) so that the test checks the session's ending, not the machine
+    cfg = load_config(overrides=["sim.camera_fps=10.0", "link.silence_timeout_s=1.0"])
     sim = build_sim(cfg)
     emu = Emulator(cfg.emulator, sim.limits, q0=sim.q0)
     path = emu.start()
@@ -163,7 +165,7 @@ def test_realtime_session_over_a_real_pty_stops_and_disables_the_arm():
             sc = run_realtime(cfg, 4.0, arm=link, cameras=cams, model=sim.scene.model, rig=sim.rig,
                               scene=sim.scene, t0=t0)
             st = link.wait_state()  # a report sent after the session ended
-        assert sc.frames >= 3 and not sc.faults, sc.summary()
+        assert sc.frames >= 2 and not sc.faults, sc.summary()
         assert not st.servo_on and not st.moving  # controlled stop, then servo off
         assert len(sc.timings_ms["control_late"]) > 250  # the control thread ran at its rate
     finally:

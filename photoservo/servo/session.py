@@ -483,6 +483,7 @@ def run_realtime(cfg: Config, duration_s: float, *, arm, cameras, model, rig: Ri
             stop.set()
 
     thread = threading.Thread(target=control, name="control", daemon=True)
+    arm.wait_state()  # the first state report: the control loop starts from a measured state
     if not no_motion:
         arm.enable()
     thread.start()
