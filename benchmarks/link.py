@@ -267,9 +267,11 @@ def _rt_permitted() -> bool:
     return subprocess.run([sys.executable, "-c", code], check=False, capture_output=True).returncode == 0
 
 
-def _control_in_process(path: str, seconds: float, conn, rt: bool) -> None:
+def _control_in_process(path: str, seconds: float, conn, rt: bool, switch_s: float | None) -> None:
     if rt:  # before the link's reader thread starts, so that it inherits the policy
         set_realtime(40)
+    if switch_s is not None:
+        sys.setswitchinterval(switch_s)
     try:
         conn.send(control_loop(path, seconds))
     except Exception as e:  # noqa: BLE001 - report to the parent instead of dying silently
@@ -349,19 +351,20 @@ def run_condition(name: str, loads, own_process: bool, seconds: float, rt: bool 
     if switch_s is not None:
         sys.setswitchinterval(switch_s)
     try:
-        return _run_condition(name, loads, own_process, seconds, rt)
+        return _run_condition(name, loads, own_process, seconds, rt, switch_s)
     finally:
         sys.setswitchinterval(old_switch)
 
 
-def _run_condition(name: str, loads, own_process: bool, seconds: float, rt: bool) -> dict:
+def _run_condition(name: str, loads, own_process: bool, seconds: float, rt: bool,
+                   switch_s: float | None) -> dict:
     with Bridge() as br:
         if own_process:
             ctx = mp.get_context("spawn")
             parent, child = ctx.Pipe(duplex=False)
 
             def fn():
-                p = ctx.Process(target=_control_in_process, args=(br.path, seconds, child, rt))
+                p = ctx.Process(target=_control_in_process, args=(br.path, seconds, child, rt, switch_s))
                 p.start()
                 res = parent.recv()
                 p.join(timeout=10)
@@ -446,6 +449,8 @@ def main() -> int:
     ap.add_argument("--seconds", type=float, default=8.0, help="length of each run (s)")
     ap.add_argument("--repeats", type=int, default=3, help="runs per number (median reported)")
     ap.add_argument("--quick", action="store_true", help="2 s runs, 1 repeat (a smoke test)")
+    ap.add_argument("--only", metavar="TEXT", help="run only the control-loop conditions whose name has TEXT "
+                    "(skips parts 1 and 3; does not write the JSON)")
     args = ap.parse_args()
     if args.quick:
         args.seconds, args.repeats = 2.0, 1
@@ -457,7 +462,7 @@ def main() -> int:
     print("1. link over a pty, bridge emulator in its own process (host and bridge SCHED_FIFO when "
           "permitted)", flush=True)
     result["link"] = []
-    for baud in (921600, 115200):
+    for baud in () if args.only else (921600, 115200):
         r = _median([link_numbers_rt(baud, args.seconds) for _ in range(args.repeats)])
         result["link"].append(r)
         print(f"  {baud:>7} baud: max setpoint rate {r['max_setpoint_rate_hz']:7.1f} Hz | 250 Hz stream: sent "
@@ -479,6 +484,8 @@ def main() -> int:
     ]
     if rt:
         conditions.append(("+ GA + Rerun, own process SCHED_FIFO", [load_ga, load_rerun], True, {"rt": True}))
+    if args.only:
+        conditions = [c for c in conditions if args.only in c[0]]
     result["control"] = []
     print(f"  {'condition':<38} {'p50':>6} {'p99':>6} {'max':>7} {'>12ms':>6} {'wdog':>5} {'nack':>5} "
           f"{'step p99':>8} {'lost':>4}  (ms; lost = runs whose link timed out)")
@@ -495,7 +502,7 @@ def main() -> int:
 
     print("3. line faults (both directions), host streaming 'hold' at 250 Hz", flush=True)
     result["faults"] = []
-    for drop, corrupt in ((0.0005, 0.001), (0.002, 0.005)):
+    for drop, corrupt in () if args.only else ((0.0005, 0.001), (0.002, 0.005)):
         r = fault_run(args.seconds, drop, corrupt)
         result["faults"].append(r)
         print(f"  drop {drop:<7g} corrupt {corrupt:<7g}: host CRC/frame errors {r['host_crc_errors']}, bridge "
@@ -505,6 +512,8 @@ def main() -> int:
     result["machine"]["loadavg_end"] = os.getloadavg()
     print(f"load average start {load0[0]:.2f}, end {result['machine']['loadavg_end'][0]:.2f} "
           f"on {os.cpu_count()} CPUs (shared machine)")
+    if args.only:
+        return 0
     write_text_atomic(OUT, json.dumps(result, indent=1, default=float) + "\n")
     print(f"wrote {OUT.relative_to(ROOT)}")
     return 0

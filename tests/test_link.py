@@ -12,7 +12,7 @@ import pytest
 from photoservo.robot import protocol as P
 from photoservo.robot.emulator import Emulator, EmulatorParams
 from photoservo.robot.link import Link, LinkError, LinkParams
-from photoservo.robot.pa10 import HOME_Q, load_limits
+from photoservo.robot.pa10 import HOME_Q, fk, load_limits
 from photoservo.tomlconf import build_dataclass, configs_dir, read_toml
 
 LIMITS = load_limits()
@@ -312,6 +312,7 @@ def test_state_at_interpolates_between_reports(emu, link):
     np.testing.assert_allclose(s.q, 0.25 * a.q + 0.75 * b.q, atol=1e-12)
     with pytest.raises(LookupError):
         link.state_at(hist[0].t - 1.0)
+    np.testing.assert_allclose(link.flange_at(t), fk(0.25 * a.q + 0.75 * b.q), atol=1e-9)
 
 
 def test_exit_stops_and_disables(emu):

@@ -30,6 +30,7 @@ import serial
 
 from photoservo.errors import InputError
 from photoservo.robot import protocol as P
+from photoservo.robot.pa10 import fk
 
 
 class LinkError(ConnectionError):
@@ -332,6 +333,11 @@ class Link:
         w = 0.0 if b.t == a.t else (t - a.t) / (b.t - a.t)
         return JointState(t, b.t_rx, a.q + w * (b.q - a.q), a.dq + w * (b.dq - a.dq),
                           a.status, a.fault, a.report)
+
+    def flange_at(self, t: float, T_flange_tool: np.ndarray | None = None) -> np.ndarray:
+        """Pose of the flange (or of a tool / the left camera attached by T_flange_tool) in the
+        base frame at host time `t`: fk(state_at(t).q), 4x4, mm. Raises as `state_at`."""
+        return fk(self.state_at(t).q, T_flange_tool)
 
     @property
     def crc_errors(self) -> int:
