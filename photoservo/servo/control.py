@@ -12,10 +12,10 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-import cv2
 import numpy as np
 
 from photoservo.errors import InputError
+from photoservo.robot.pa10 import make_pose
 
 Z_UP = np.array([0.0, 0.0, 1.0])
 
@@ -48,19 +48,6 @@ class ServoParams:
             raise InputError(f"config key '{where}.feed_forward' must be in 0..1, got {self.feed_forward}")
         if self.collect_height_mm >= self.hover_mm:
             raise InputError(f"config key '{where}.collect_height_mm' must be below hover_mm ({self.hover_mm})")
-
-
-def make_pose(R: np.ndarray, p: np.ndarray) -> np.ndarray:
-    """4x4 homogeneous transform from a rotation and a translation."""
-    T = np.eye(4)
-    T[:3, :3] = R
-    T[:3, 3] = p
-    return T
-
-
-def rotvec(R: np.ndarray) -> np.ndarray:
-    """Axis-angle vector (rad) of a rotation matrix (log map), robust near 0 and pi."""
-    return cv2.Rodrigues(np.asarray(R, dtype=np.float64))[0].ravel()
 
 
 def long_axis(R_base_model: np.ndarray, size_mm: tuple[float, float]) -> np.ndarray:
@@ -105,14 +92,6 @@ def desired_camera_pose(
     return make_pose(R_des, p_centre - R_des @ offset)
 
 
-def pose_error(T_base_cam: np.ndarray, T_base_cam_des: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Error of the desired camera pose relative to the current one, in the base frame:
-    e_p = p* - p (mm), e_R = log(R* · Rᵀ) as an axis-angle vector (rad)."""
-    e_p = T_base_cam_des[:3, 3] - T_base_cam[:3, 3]
-    e_R = rotvec(T_base_cam_des[:3, :3] @ T_base_cam[:3, :3].T)
-    return e_p, e_R
-
-
 def yaw_error_deg(T_base_cam: np.ndarray, T_base_cam_des: np.ndarray) -> float:
     """Angle (deg) between the current and desired camera x axes projected on the horizontal."""
     def heading(R: np.ndarray) -> float:
@@ -121,13 +100,13 @@ def yaw_error_deg(T_base_cam: np.ndarray, T_base_cam_des: np.ndarray) -> float:
     return math.degrees(abs((d + math.pi) % (2 * math.pi) - math.pi))
 
 
-def camera_twist(
-    e_p: np.ndarray, e_R: np.ndarray, v_target: np.ndarray, params: ServoParams
-) -> tuple[np.ndarray, np.ndarray]:
-    """PBVS law: v = k_p · e_p + f · v_target, ω = k_R · e_R, each clipped to its cap.
-    v_target is the tracker's target velocity in the base frame (mm/s). Returns (v mm/s, ω rad/s)."""
-    v = params.k_position * e_p + params.feed_forward * np.asarray(v_target, dtype=float)
-    w = params.k_rotation * e_R
+def camera_twist(e: np.ndarray, v_target: np.ndarray, params: ServoParams) -> tuple[np.ndarray, np.ndarray]:
+    """PBVS law: v = k_p · e_p + f · v_target, ω = k_R · e_R, each clipped to its cap, where
+    e = [e_p; e_R] = `pa10.pose_error(T_base_cam*, T_base_cam)` (mm, rad; base frame: the twist
+    that reaches the desired pose in unit time) and v_target is the tracker's target velocity
+    in the base frame (mm/s). Returns (v mm/s, ω rad/s)."""
+    v = params.k_position * e[:3] + params.feed_forward * np.asarray(v_target, dtype=float)
+    w = params.k_rotation * e[3:]
     v = _clip_norm(v, params.max_speed_mm_s)
     w = _clip_norm(w, math.radians(params.max_rotation_deg_s))
     return v, w

@@ -28,6 +28,7 @@ from typing import Callable, Literal
 import numpy as np
 
 from photoservo.robot import pa10
+from photoservo.robot.pa10 import make_pose, pose_error
 from photoservo.robot import protocol as P
 from photoservo.robot.clock import Rate
 from photoservo.servo.config import Config
@@ -36,8 +37,6 @@ from photoservo.servo.control import (
     camera_twist,
     desired_camera_pose,
     flange_twist,
-    make_pose,
-    pose_error,
     yaw_error_deg,
 )
 from photoservo.servo.motion import Motion, Setpoint
@@ -119,10 +118,11 @@ class Controller:
         e_p = np.full(3, np.nan)
         yaw = float("nan")
         if T_des is not None:
-            e_p, e_R = pose_error(T_base_cam, T_des)
+            e = pose_error(T_des, T_base_cam)
+            e_p = e[:3]
             yaw = yaw_error_deg(T_base_cam, T_des)
             self._update_hold(now, float(np.linalg.norm(e_p)), yaw)
-            v, w = camera_twist(e_p, e_R, track.velocity_mm_s, p)
+            v, w = camera_twist(e, track.velocity_mm_s, p)
             T_base_flange = pa10.fk(q)
             twist = flange_twist(v, w, T_base_cam[:3, 3], T_base_flange[:3, 3])
             dq_target = pa10.dls_step(q, twist, p.damping, k_null=0.5)
@@ -368,7 +368,7 @@ def _score_hold(sc: Scores, ctrl: Controller, scene: SimScene, info: ControlInfo
     is scene time (s)."""
     T_true = scene.motion.pose(now if T_true_time is None else T_true_time)
     T_des = desired_camera_pose(T_true, scene.size_mm(), ctrl.height_mm, info.T_base_cam[:3, :3], centre)
-    e_p, _ = pose_error(info.T_base_cam, T_des)
+    e_p = pose_error(T_des, info.T_base_cam)[:3]
     if scene.distractor_motion is not None:
         c = info.T_base_cam[:3, :3] @ centre + info.T_base_cam[:3, 3]
         d = scene.distractor_motion.pose(now)[:3, 3]
