@@ -128,7 +128,7 @@ def _setup_static(rec, cfg, rig, photo, model, seed: int, extra: dict) -> None:
 def _report(args, sc, rec) -> int:
     s = sc.summary()
     if rec is not None:
-        s["recording"] = str(rec.path)
+        s["recording"] = _recording_files(rec)
     if args.json:
         print(json.dumps(s, default=float))
     else:
@@ -142,8 +142,19 @@ def _report(args, sc, rec) -> int:
         for f in s["faults"]:
             print(f"fault: {f}")
         if rec is not None:
-            print(f"recording: {rec.path}")
+            print(f"recording: {_recording_files(rec)}")
     return 1 if s["faults"] else 0
+
+
+def _recording_files(rec) -> str:
+    """The file(s) actually written: the path itself, or its finished segments."""
+    from photoservo.servo.recording import segment_path
+
+    if rec.segment_s <= 0:
+        return str(rec.path)
+    n = rec.segment_index
+    first = segment_path(rec.path, 1)
+    return str(first) if n <= 1 else f"{first} .. {segment_path(rec.path, n).name} ({n} segments, read as one: {rec.path})"
 
 
 def _run_sim(args, cfg) -> int:
