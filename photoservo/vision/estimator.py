@@ -138,36 +138,42 @@ class GeneSpace:
 
     def decode(self, g: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """Genes (P, 7) -> (R (P,3,3), t (P,3) mm, alpha (P,) px/mm, valid (P,) bool).
-        Tilt beyond tilt_max is clamped onto it; `valid` is False outside the search volume."""
-        g = np.atleast_2d(np.asarray(g, dtype=np.float64))
-        K = self.rig.left.K
+        Tilt beyond tilt_max is clamped onto it; `valid` is False outside the search volume:
+        depth or alpha out of range, model origin outside either image (pinhole), apparent size
+        below min_apparent_px. (Called once per generation: kept to few numpy operations.)"""
+        g = np.asarray(g, dtype=np.float64)
+        if g.ndim == 1:
+            g = g[None]
+        p, K, rig = self.params, self.rig.left.K, self.rig
+        tmax = math.radians(p.tilt_max_deg)
         tx, ty = g[:, 4], g[:, 5]
-        tmax = math.radians(self.params.tilt_max_deg)
-        th = np.hypot(tx, ty)
-        shrink = np.where(th > tmax, tmax / np.maximum(th, 1e-12), 1.0)
-        R = rotation_from_heading_tilt(g[:, 3], tx * shrink, ty * shrink)
+        th2 = tx * tx + ty * ty
+        if np.any(th2 > tmax * tmax):
+            shrink = np.minimum(1.0, tmax / np.sqrt(np.maximum(th2, 1e-24)))
+            tx, ty = tx * shrink, ty * shrink
+        R = rotation_from_heading_tilt(g[:, 3], tx, ty)
+        t = np.empty((len(g), 3))
         if self.kind == "image":
             z = 1000.0 / g[:, 2]
-            xn = (g[:, 0] - K[0, 2]) / K[0, 0]
-            yn = (g[:, 1] - K[1, 2]) / K[1, 1]
-            t = np.column_stack([xn * z, yn * z, z])
+            t[:, 0] = (g[:, 0] - K[0, 2]) * (z / K[0, 0])
+            t[:, 1] = (g[:, 1] - K[1, 2]) * (z / K[1, 1])
+            t[:, 2] = z
             alpha = self.fx / (np.exp(g[:, 6]) * z)
         else:
-            t = g[:, :3].copy()
+            t[:] = g[:, :3]
             z = t[:, 2]
             alpha = np.exp(g[:, 6])
-        p = self.params
         valid = (z >= p.z_min_mm * 0.999) & (z <= p.z_max_mm * 1.001)
         valid &= (alpha >= p.alpha_min * 0.999) & (alpha <= p.alpha_max * 1.001)
-        # the model origin must be seen by both cameras
-        for cam, X in ((self.rig.left, t), (self.rig.right, t @ self.rig.R.T + self.rig.T)):
-            with np.errstate(divide="ignore", invalid="ignore"):
-                uc = cam.K[0, 0] * X[:, 0] / X[:, 2] + cam.K[0, 2]
-                vc = cam.K[1, 1] * X[:, 1] / X[:, 2] + cam.K[1, 2]
-            valid &= (X[:, 2] > 0) & (uc >= -0.5) & (uc <= cam.width - 0.5) & (vc >= -0.5) & (vc <= cam.height - 0.5)
         # apparent size (longest side of the target in the image at a frontal pose)
-        apparent = self.fx * max(self.model.size_px) / (alpha * z)
-        valid &= apparent >= p.min_apparent_px
+        valid &= alpha * z <= self.fx * max(self.model.size_px) / p.min_apparent_px
+        # the model origin must be seen by both cameras
+        with np.errstate(divide="ignore", invalid="ignore"):
+            for cam, X in ((rig.left, t), (rig.right, t @ rig.R.T + rig.T)):
+                w = 1.0 / X[:, 2]
+                uc = X[:, 0] * w * cam.K[0, 0] + cam.K[0, 2]
+                vc = X[:, 1] * w * cam.K[1, 1] + cam.K[1, 2]
+                valid &= (w > 0) & (uc >= -0.5) & (uc <= cam.width - 0.5) & (vc >= -0.5) & (vc <= cam.height - 0.5)
         return R, t, alpha, valid
 
     def encode(self, R: np.ndarray, t: np.ndarray, alpha: np.ndarray) -> np.ndarray:
@@ -393,28 +399,34 @@ class PoseSearch:
         best = self.best()
         return self.resolve_twins(best) if ambiguity_check else best
 
+    def local_search(self, R: np.ndarray, t: np.ndarray, alpha: float, position_frac: float, heading_deg: float,
+                     tilt_deg: float, alpha_frac: float) -> Candidate:
+        """A short GA of its own (half the patience) in a narrow window around one pose, seeded
+        with it; its work is counted in this search's generations and evaluations."""
+        p = self.est_params
+        short = dataclasses.replace(p, min_generations=max(1, p.patience // 2), patience=max(2, p.patience // 2),
+                                    max_generations=max(p.patience, p.max_generations // 4))
+        sub = PoseSearch(self.model, self.rig, self.frame, self.ga.params, short, self.fit_params, self.ga.rng)
+        sub.ga.reset(sub.space.window(R, t, alpha, position_mm=position_frac * float(t[2]), heading_deg=heading_deg,
+                                      tilt_deg=tilt_deg, alpha_frac=alpha_frac))
+        sub.seed(R, t, alpha)
+        c = sub.run(ambiguity_check=False)
+        self.ga.evaluations += sub.ga.evaluations
+        self.ga.generation += c.generations
+        return c
+
     def resolve_twins(self, best: Candidate) -> Candidate:
         """Try the look-alike twins of a converged pose (`alternatives`), each by a short GA in a
         narrow window around it; the best of the pose and its twins."""
-        p = self.est_params
         if not np.isfinite(best.fitness):
             return best
-        short = dataclasses.replace(p, min_generations=max(1, p.patience // 2), patience=max(2, p.patience // 2),
-                                    max_generations=max(p.patience, p.max_generations // 4))
         for R_alt in alternatives(best.R, best.position_mm):
-            sub = PoseSearch(self.model, self.rig, self.frame, self.ga.params, short, self.fit_params, self.ga.rng)
-            z = float(best.position_mm[2])
-            sub.ga.reset(sub.space.window(R_alt, best.position_mm, best.alpha, position_mm=0.03 * z,
-                                          heading_deg=15.0, tilt_deg=15.0, alpha_frac=0.08))
-            sub.seed(R_alt, best.position_mm, best.alpha)
-            c = sub.run(ambiguity_check=False)
-            self.ga.evaluations += sub.ga.evaluations
-            self.ga.generation += c.generations
+            c = self.local_search(R_alt, best.position_mm, best.alpha, position_frac=0.03, heading_deg=15.0,
+                                  tilt_deg=15.0, alpha_frac=0.08)
             if c.fitness > best.fitness:
                 best = c
                 self.ga.inject(self.space.encode(c.R, c.position_mm, c.alpha))
         return Candidate(best.R, best.position_mm, best.alpha, best.fitness, self.ga.generation, best.source)
-
 
     def refine_tilt(self, best: Candidate, left_bgr: np.ndarray, right_bgr: np.ndarray) -> Candidate:
         """Tilt from the disparity gradient (`vision/stereo_plane.py`): fit the target's plane
@@ -422,7 +434,6 @@ class PoseSearch:
         position, heading and scale by a short GA with the tilt held within 1.5 deg, and keep the
         result when its fitness is at most `plane_fitness_tol` below `best` (the hue fitness
         vetoes a plane fitted to the wrong thing)."""
-        p = self.est_params
         lut = np.zeros(256, bool)
         lut[:HUE_BINS] = np.asarray(self.model.target_hues, bool)
         plane = fit_target_plane(best.R, best.position_mm, best.alpha, self.model, grey(left_bgr),
@@ -430,17 +441,8 @@ class PoseSearch:
         if plane is None:
             return best
         R2, t2 = align_to_plane(best.R, best.position_mm, plane)
-        short = dataclasses.replace(p, min_generations=max(1, p.patience // 2), patience=max(2, p.patience // 2),
-                                    max_generations=max(p.patience, p.max_generations // 4))
-        sub = PoseSearch(self.model, self.rig, self.frame, self.ga.params, short, self.fit_params, self.ga.rng)
-        z = float(t2[2])
-        sub.ga.reset(sub.space.window(R2, t2, best.alpha, position_mm=0.02 * z, heading_deg=5.0, tilt_deg=1.5,
-                                      alpha_frac=0.05))
-        sub.seed(R2, t2, best.alpha)
-        c = sub.run(ambiguity_check=False)
-        self.ga.evaluations += sub.ga.evaluations
-        self.ga.generation += c.generations
-        if c.fitness >= best.fitness - p.plane_fitness_tol:
+        c = self.local_search(R2, t2, best.alpha, position_frac=0.02, heading_deg=5.0, tilt_deg=1.5, alpha_frac=0.05)
+        if c.fitness >= best.fitness - self.est_params.plane_fitness_tol:
             return Candidate(c.R, c.position_mm, c.alpha, c.fitness, self.ga.generation, best.source)
         return best
 

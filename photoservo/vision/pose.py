@@ -28,27 +28,28 @@ def rotation_from_heading_tilt(psi: np.ndarray, tilt_x: np.ndarray, tilt_y: np.n
     """
     psi, tx, ty = np.broadcast_arrays(*(np.asarray(a, dtype=np.float64) for a in (psi, tilt_x, tilt_y)))
     th = np.hypot(tx, ty)
-    safe = np.where(th > 1e-12, th, 1.0)
-    kx, ky = np.where(th > 1e-12, tx / safe, 1.0), np.where(th > 1e-12, ty / safe, 0.0)
+    small = th < 1e-12
+    inv = 1.0 / np.where(small, 1.0, th)
+    kx = np.where(small, 1.0, tx * inv)
+    ky = np.where(small, 0.0, ty * inv)
     s, c = np.sin(th), np.cos(th)
     v = 1.0 - c
-    # Rodrigues with axis k = (kx, ky, 0)
-    Rt = np.empty(th.shape + (3, 3))
-    Rt[..., 0, 0] = c + kx * kx * v
-    Rt[..., 0, 1] = kx * ky * v
-    Rt[..., 0, 2] = ky * s
-    Rt[..., 1, 0] = kx * ky * v
-    Rt[..., 1, 1] = c + ky * ky * v
-    Rt[..., 1, 2] = -kx * s
-    Rt[..., 2, 0] = -ky * s
-    Rt[..., 2, 1] = kx * s
-    Rt[..., 2, 2] = c
     cp, sp = np.cos(psi), np.sin(psi)
-    Rz = np.zeros(psi.shape + (3, 3))
-    Rz[..., 0, 0], Rz[..., 0, 1] = cp, -sp
-    Rz[..., 1, 0], Rz[..., 1, 1] = sp, cp
-    Rz[..., 2, 2] = 1.0
-    return Rt @ Rz
+    # R_tilt (Rodrigues with axis k = (kx, ky, 0)) times Rz(psi), multiplied out
+    a00, a01, a02 = c + kx * kx * v, kx * ky * v, ky * s
+    a10, a11, a12 = kx * ky * v, c + ky * ky * v, -kx * s
+    a20, a21, a22 = -ky * s, kx * s, c
+    R = np.empty(th.shape + (3, 3))
+    R[..., 0, 0] = a00 * cp + a01 * sp
+    R[..., 0, 1] = a01 * cp - a00 * sp
+    R[..., 0, 2] = a02
+    R[..., 1, 0] = a10 * cp + a11 * sp
+    R[..., 1, 1] = a11 * cp - a10 * sp
+    R[..., 1, 2] = a12
+    R[..., 2, 0] = a20 * cp + a21 * sp
+    R[..., 2, 1] = a21 * cp - a20 * sp
+    R[..., 2, 2] = a22
+    return R
 
 
 def heading_tilt_from_rotation(R: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
