@@ -99,6 +99,7 @@ def _relog(src: Path, dst: Path, cfg_text: str, generations: int) -> None:
             rec.log_estimate(fr.index, m.t, found=e.found, fitness=e.fitness,
                              generations=e.generations if fr.index == 0 else generations,
                              T_base_left=m.T_base_left)
+            rec.log_timings(m.t, {"hue": 10.0, "ga": 40.0}, frame=fr.index)
         for t, q in zip(a.arm["q"].t, a.arm["q"].values):
             rec.log_arm(t, q)
 
@@ -113,6 +114,10 @@ def test_real_time_recording_replays_with_its_recorded_generation_counts(recorde
     res = replay(setup, tmp_path / "a.rrd")
     assert res.frames[0].generations > 8                      # acquisition: the estimator's own
     assert [f.generations for f in res.frames[1:]] == [3] * 5
+    # a real-time run's track reached the control law after the frame's hue + GA time (50 ms)
+    t_first = read_recording(rt).frames[0].capture_times[0]
+    t_track = next(t for t, text in res.events if text == "track tracking")
+    assert t_track == pytest.approx(t_first + setup.cfg.sim.capture_latency_s + 0.05)
     fixed = replay(load_replay(rt, fixed_generations=True), tmp_path / "b.rrd")
     assert [f.generations for f in fixed.frames[1:]] == [8] * 5
     assert fixed.frames[1].fitness != res.frames[1].fitness

@@ -18,7 +18,8 @@ Replay (`replay`), from the file alone:
   * control, OPEN LOOP: the recorded joint states (arm/q, linearly interpolated between its
     samples; dq by finite differences) drive a fresh `session.Controller` at the control rate
     ([motion] rate_hz) with the replayed track, which becomes available at capture time +
-    [sim] capture_latency_s, as in the lockstep session. What it would have commanded is
+    [sim] capture_latency_s, as in the lockstep session (for a real-time recording, + the
+    frame's recorded hue + GA time, when its track reached the control thread). What it would have commanded is
     logged as arm/setpoint and arm/command (setpoint.dq, as the session logs it) beside the
     recorded q. The arm does not move: servo gains change the commands, not the frames, so
     tune gains closed loop with `track --sim --world-from REC`.
@@ -213,6 +214,23 @@ def _frames_with_meta(setup: ReplaySetup) -> Iterator[tuple[Frame, Any]]:
         yield fr, m
 
 
+def _processing_delays(rec: Recording) -> dict[int, float]:
+    """frame -> seconds the recorded real-time run spent on it (timing/hue + timing/ga, logged
+    at the frame's time): its track reached the control thread that much after delivery."""
+    h, g = rec.timings.get("hue"), rec.timings.get("ga")
+    if h is None or g is None or len(h.t) != len(g.t):
+        return {}
+    by_t = {float(t): 1e-3 * float(a[0] + b[0]) for t, a, b in zip(h.t, h.values, g.values)}
+    return {m.index: by_t[m.t] for m in rec.frames if m.t in by_t}
+
+
+def _available(m: Any, latency: float, busy: dict[int, float]) -> float:
+    """When the control law may use frame m's track: capture + latency (+ the recorded
+    processing time of a real-time run), as in the lockstep session."""
+    t_l = (m.capture_times or (m.t,))[0]
+    return t_l + latency + busy.get(m.index, 0.0)
+
+
 def replay(setup: ReplaySetup, out: str | Path | None = None, *, view: bool = False,
            progress: Callable[[int, int], None] | None = None) -> ReplayResult:
     """Re-run the tracker on every recorded frame and the control law open loop on the recorded
@@ -238,6 +256,7 @@ def replay(setup: ReplaySetup, out: str | Path | None = None, *, view: bool = Fa
     arm = RecordedArm(q_series.t, q_series.values) if q_series is not None and len(q_series.t) else None
     dt = 1.0 / cfg.motion.rate_hz
     latency = cfg.sim.capture_latency_s
+    busy = _processing_delays(rec) if not setup.recorded_cfg.sim.lockstep else {}
     n_total = len(rec.frames)
     sc = S.Scores()
     results: list[FrameResult] = []
@@ -246,7 +265,7 @@ def replay(setup: ReplaySetup, out: str | Path | None = None, *, view: bool = Fa
     t_start = time.perf_counter()
     try:
         recorder.log_static_setup(dump_rig(rig), setup.photo, setup.model, dump_config(cfg),
-                                  rec.setup.seed, rec.setup.versions or None)
+                                  rec.setup.seed)   # versions: this software, which replayed it
         recorder.event(rec.frames[0].t, f"replay of {setup.path.name}: {setup.generations_note}")
         frames = _frames_with_meta(setup)
         pending: tuple[Frame, Any] | None = next(frames, None)
@@ -256,7 +275,7 @@ def replay(setup: ReplaySetup, out: str | Path | None = None, *, view: bool = Fa
 
         def deliver(upto: float) -> None:
             nonlocal pending, track, prev_status
-            while pending is not None and (pending[1].capture_times or (pending[1].t,))[0] + latency <= upto + 1e-9:
+            while pending is not None and _available(pending[1], latency, busy) <= upto + 1e-9:
                 fr, m = pending
                 t_l, t_r = m.capture_times or (m.t, m.t)
                 n_rec = rec_gens.get(fr.index)
@@ -274,7 +293,7 @@ def replay(setup: ReplaySetup, out: str | Path | None = None, *, view: bool = Fa
                     None if track.t_left is None else tuple(float(x) for x in track.t_left),
                     None if track.alpha_measured is None else float(track.alpha_measured)))
                 if track.status != prev_status:
-                    ctrl.events.append((t_l + latency, f"track {track.status}"))
+                    ctrl.events.append((_available(m, latency, busy), f"track {track.status}"))
                     prev_status = track.status
                 if progress is not None:
                     progress(len(results), n_total)
