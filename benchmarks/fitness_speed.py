@@ -14,6 +14,9 @@ threads over (individual, camera) jobs). Per configuration: median (and 10th/90t
 wall ms per call over `--repeats` calls after one warm-up call, the CPU ms per call of the
 process, the speed-up over the paper (213 ms / median) and numpy / numba in the same run.
 JIT warm-up: a fresh process compiling into an empty cache (cold) and loading it (warm).
+Wall time to converge: `estimate` with the default configuration from the default search volume
+on `--converge-scenes` seeded scenes (median, p90, share within 1 s, generations, and the share
+of the wall time spent in fitness calls).
 
 The machine has 2 cores shared with other jobs: the load average is printed and stored; wall
 times on a loaded machine are pessimistic, the CPU column is the steadier one.
@@ -127,11 +130,50 @@ def jit_warmup() -> dict:
     return out
 
 
+def converge_times(cfg, n_scenes: int) -> dict:
+    """Wall time of `estimate` (default configuration, default search volume) on seeded scenes,
+    squid / crab / fish in turn at 300-1500 mm: seconds, generations of the best island, total
+    fitness evaluations, and the share of the time spent in fitness calls."""
+    import photoservo.vision.estimator as est_mod
+    from photoservo.vision.estimator import estimate
+
+    spent = []
+
+    def timed_fitness(*a, **k):
+        w0 = time.perf_counter()
+        try:
+            return fitness(*a, **k)
+        finally:
+            spent.append(time.perf_counter() - w0)
+
+    rows = []
+    original = est_mod.fitness
+    est_mod.fitness = timed_fitness  # count the fitness share of the wall time
+    try:
+        for i in range(n_scenes):
+            sc = random_scene(3000 + i, cfg.synthetic, cfg.photo_model, kind=("squid", "crab", "fish")[i % 3])
+            model = build_photo_model(sc.photo, cfg.photo_model)
+            spent.clear()
+            e = estimate(model, sc.left, sc.right, sc.rig, cfg.ga, cfg.estimator, cfg.fitness, seed=i)
+            rows.append({"seconds": e.seconds, "generations": e.generations, "evaluations": e.evaluations,
+                         "found": e.found, "converged": e.generations < cfg.estimator.max_generations,
+                         "fitness_seconds": float(sum(spent)),
+                         "points": len(model.inner_uv) + len(model.outer_uv)})
+    finally:
+        est_mod.fitness = original
+    sec = np.array([r["seconds"] for r in rows])
+    return {"scenes": rows, "median_s": float(np.median(sec)), "p90_s": float(np.percentile(sec, 90)),
+            "within_1s": float(np.mean(sec <= 1.0)),
+            "median_generations": float(np.median([r["generations"] for r in rows])),
+            "fitness_share": float(sum(r["fitness_seconds"] for r in rows) / sec.sum())}
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--repeats", type=int, default=300, help="timed calls per configuration (numba)")
     ap.add_argument("--numpy-repeats", type=int, default=30, help="timed calls per configuration (numpy)")
     ap.add_argument("--no-warmup", action="store_true", help="skip the JIT warm-up subprocesses")
+    ap.add_argument("--converge-scenes", type=int, default=12, help="scenes for the wall time to converge (0: skip)")
     args = ap.parse_args()
 
     cfg = load_config()
@@ -160,6 +202,7 @@ def main() -> None:
                              "x_paper": PAPER_S * 1e3 / r["median_ms"],
                              "numpy_over_this": res["numpy"]["median_ms"] / r["median_ms"],
                              "equals_reference": bool(same)})
+    conv = converge_times(cfg, args.converge_scenes) if args.converge_scenes > 0 else None
     load_after = os.getloadavg()
     warm = None if args.no_warmup else jit_warmup()
 
@@ -176,6 +219,11 @@ def main() -> None:
     target = next(r for r in rows if r["rig"] == "distorted" and r["individuals"] == 30 and r["kernel"] == "numba")
     print(f"target <= 0.5 ms/generation at 30 x 1000 (distorted rig, default kernel): "
           f"{target['median_ms']:.3f} ms median -> {'MET' if target['median_ms'] <= 0.5 else 'NOT MET'}")
+    if conv:
+        print(f"wall time to converge (estimate, default config and search volume, {len(conv['scenes'])} scenes): "
+              f"median {conv['median_s']:.2f} s, p90 {conv['p90_s']:.2f} s, {conv['within_1s']:.0%} within 1 s, "
+              f"median {conv['median_generations']:.0f} generations; fitness calls are "
+              f"{conv['fitness_share']:.0%} of the wall time")
     if warm:
         print(f"JIT warm-up (fresh process): cold cache import {warm['cold']['import_s']:.2f} s + first call "
               f"{warm['cold']['first_call_s']:.2f} s (compiles); warm cache import {warm['warm']['import_s']:.2f} s"
@@ -185,7 +233,7 @@ def main() -> None:
         "paper_ms_per_generation": PAPER_S * 1e3, "points": N_POINTS, "cpus": os.cpu_count(),
         "load_average_before": load_before, "load_average_after": load_after,
         "target_ms": 0.5, "target_met": target["median_ms"] <= 0.5,
-        "rows": rows, "jit_warmup": warm}, indent=1))
+        "rows": rows, "converge": conv, "jit_warmup": warm}, indent=1))
     print(f"wrote {out}")
 
 
