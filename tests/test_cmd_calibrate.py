@@ -252,7 +252,7 @@ def test_water_prints_height_and_updates_config(tmp_path, capsys):
         cv2.imwrite(str(views / side / "0000.png"), renderer(CHARUCO, cam).render(T[:3, :3], T[:3, 3], noise_sigma=1.0))
     (views / "poses.csv").write_text("name,x_mm,y_mm,z_mm,rx_rad,ry_rad,rz_rad\n0000," + ",".join(pose_row(T_bf)) + "\n")
     cfg = tmp_path / "site.toml"
-    cfg.write_text("# my site\n[world]\nwater_z_mm = -300.0   # measured by hand\nother = 1\n")
+    cfg.write_text("# my site\n[tracker]\nwater_z_mm = -300.0   # measured by hand\nother = 1\n")
     rig = rig_file(tmp_path, hand_eye=(X[:3, :3], X[:3, 3]))
     code, text, err = run_cli(["calibrate", "water", "--rig", str(rig), "--views", str(views), *BOARD_ARGS,
                                "--charuco", "--update", str(cfg)], capsys)
@@ -260,12 +260,12 @@ def test_water_prints_height_and_updates_config(tmp_path, capsys):
     assert "(triangulated)" in text
     from photoservo.tomlconf import configs_dir, read_toml
 
-    known = "water_z_mm" in read_toml(configs_dir() / "default.toml").get("world", {})
-    assert ("note: 'world.water_z_mm' is not a key of configs/default.toml" in text) != known
+    known = "water_z_mm" in read_toml(configs_dir() / "default.toml").get("tracker", {})
+    assert ("note: 'tracker.water_z_mm' is not a key of configs/default.toml" in text) != known
     z = float(text.split("water_z_mm = ")[1].split()[0])
     assert z == pytest.approx(water_z, abs=2.0)
     doc = tomllib.loads(cfg.read_text())
-    assert doc["world"]["water_z_mm"] == pytest.approx(z, abs=0.06) and doc["world"]["other"] == 1
+    assert doc["tracker"]["water_z_mm"] == pytest.approx(z, abs=0.06) and doc["tracker"]["other"] == 1
     assert "# measured by hand" in cfg.read_text() and cfg.read_text().startswith("# my site")
 
 

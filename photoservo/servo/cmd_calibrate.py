@@ -188,8 +188,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     add_config_options(w)
     _board_options(w, required=False)
     w.add_argument("--update", metavar="CFG.toml", help="write the height into this config file")
-    w.add_argument("--key", default="world.water_z_mm", metavar="SECTION.KEY",
-                   help="config key for --update (default world.water_z_mm)")
+    w.add_argument("--key", default="tracker.water_z_mm", metavar="SECTION.KEY",
+                   help="config key for --update (default tracker.water_z_mm)")
 
     c = sub.add_parser("capture", help="save synchronised pairs (and flange poses) for calibration",
                        description="Save stereo pairs from cameras, videos or folders, at an interval or "

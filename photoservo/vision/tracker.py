@@ -20,6 +20,7 @@ Pure: arrays in, arrays out; time is whatever clock the caller stamps frames wit
 
 from __future__ import annotations
 
+import math
 import time
 from dataclasses import dataclass
 from typing import Literal
@@ -52,6 +53,8 @@ class TrackerParams:
     gain_alpha: float  # smoothing of the size ratio alpha (0..1)
     size_tolerance: float  # re-acquisition: candidate alpha within this fraction of the track's
     max_speed_mm_s: float  # a measured jump faster than this is a miss, not a move (mm/s)
+    water_z_mm: float  # water surface height in the base frame (mm); nan = unknown
+    plane_search: bool  # search only on the water plane (position on it, heading, alpha)
 
     def validate(self, where: str) -> None:
         w = f"{where}." if where else ""
@@ -62,6 +65,8 @@ class TrackerParams:
         for k in ("gain_position", "gain_velocity", "gain_alpha"):
             if not 0.0 < getattr(self, k) <= 1.0:
                 raise InputError(f"config key '{w}{k}': must be in (0, 1], got {getattr(self, k)}")
+        if self.plane_search and not math.isfinite(self.water_z_mm):
+            raise InputError(f"config key '{w}plane_search': needs '{w}water_z_mm' (photoservo calibrate water)")
         for k in ("time_budget_ms", "window_position_mm", "window_alpha_frac", "max_speed_mm_s"):
             if getattr(self, k) <= 0:
                 raise InputError(f"config key '{w}{k}': must be > 0, got {getattr(self, k)}")
@@ -259,6 +264,10 @@ class Tracker:
         if self.T_base_left_last is not None:
             self._rebase(T_left_base @ self.T_base_left_last)
         s.set_frame(frame)
+        plane = self.p.plane_search and s.space.kind == "image"
+        if plane:
+            K, wz = self.rig.left.K, self.p.water_z_mm
+            s.ga.set_fitness(lambda g: s._fitness(on_plane(g, K, T_left_base, wz)))
         T_pred = self.predict(t)
         if T_pred is not None:
             T_lm = T_left_base @ T_pred
@@ -272,10 +281,39 @@ class Tracker:
             n += 1
             if self.use_time_budget and time.perf_counter() >= t_end:
                 break
+        if plane:
+            g, f = s.ga.best()
+            R, tl, alpha, _ = s.space.decode(on_plane(g[None], K, T_left_base, wz))
+            return (R[0], tl[0], float(alpha[0]), float(f), n) if np.isfinite(f) else None
         c = s.best()
         if not np.isfinite(c.fitness):
             return None
         return (c.R, c.position_mm, c.alpha, float(c.fitness), n)
+
+
+def on_plane(g: np.ndarray, K: np.ndarray, T_left_base: np.ndarray, water_z_mm: float) -> np.ndarray:
+    """Plane search (issue 5, Tracking): image-coded genes (u, v, q, psi, tilt_x, tilt_y, ln s)
+    (vision/estimator.py) with the inverse depth q and the tilt replaced by those of a target
+    lying flat on the water plane z = water_z_mm (base frame): the ray through (u, v) meets the
+    plane at depth z, and the model normal (model z, down into the water) is -z_base seen from
+    the camera. Only (u, v), the heading psi and the scale remain free."""
+    g = np.array(g, dtype=np.float64, copy=True)
+    R_lb = T_left_base[:3, :3]
+    n = R_lb[:, 2]  # base z (up) in the left camera frame
+    p0 = T_left_base[:3, :3] @ np.array([0.0, 0.0, water_z_mm]) + T_left_base[:3, 3]
+    xn = (g[:, 0] - K[0, 2]) / K[0, 0]
+    yn = (g[:, 1] - K[1, 2]) / K[1, 1]
+    denom = n[0] * xn + n[1] * yn + n[2]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        z = (n @ p0) / denom
+    ok = np.isfinite(z) & (z > 1.0)
+    g[ok, 2] = 1000.0 / z[ok]
+    m = -n  # model normal
+    th = math.atan2(math.hypot(m[0], m[1]), m[2])
+    ax, ay = -m[1], m[0]
+    norm = math.hypot(ax, ay)
+    g[:, 4], g[:, 5] = (ax / norm * th, ay / norm * th) if norm > 1e-12 else (0.0, 0.0)
+    return g
 
 
 def _pose(R: np.ndarray, t: np.ndarray) -> np.ndarray:
