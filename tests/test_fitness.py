@@ -226,6 +226,14 @@ def test_kernel_reads_the_right_pixels():
                                   counts_reference(R, t, alpha, MODEL, frame, RIG, p))
 
 
+@pytest.mark.parametrize("kernel", ["numba", "numba-parallel", "numpy"])
+def test_empty_population_gives_empty_scores(kernel):
+    """The GA may score only the valid part of a population, which can be empty."""
+    p = dataclasses.replace(PARAMS, kernel=kernel)
+    f = fitness(np.zeros((0, 3, 3)), np.zeros((0, 3)), np.zeros(0), MODEL, FRAME, RIG, p)
+    assert f.shape == (0,)
+
+
 def test_bad_population_is_a_value_error():
     with pytest.raises(ValueError, match="alpha <= 0"):
         fitness(R_TRUE, T_TRUE, 0.0, MODEL, FRAME, RIG, PARAMS)
