@@ -130,7 +130,7 @@ def test_world_from_rebuilds_the_same_world(recorded: Path, tmp_path: Path, caps
     # no --duration, --seed, --set sim.*: all from the recording
     assert main(["track", "--sim", "--world-from", str(recorded), "--record", str(same)]) == 0
     out = capsys.readouterr().out
-    assert "recorded" in out and "this run" in out and "position error" in out
+    assert "recorded" in out and "this run" in out and "position error" in out and "hold error" in out
     a, b = read_recording(recorded), read_recording(same)
     assert [_est(e) for e in a.estimates] == [_est(e) for e in b.estimates]   # deterministic
     assert np.array_equal(a.arm["command"].values, b.arm["command"].values)
@@ -183,3 +183,24 @@ def test_bad_recordings_are_one_line_errors(recorded: Path, tmp_path: Path, caps
     _one_line_error(["replay", str(recorded), "--set", "ga.nope=1"], capsys, "ga.nope")
     with pytest.raises(InputError, match="preview"):
         load_replay(preview)
+
+
+def test_hold_error_row_against_hand_computed_numbers(tmp_path: Path):
+    from photoservo.robot.pa10 import make_pose
+    from photoservo.servo.replay_io import run_metrics
+    from photoservo.vision.rig import Rig, default_rig, dump_rig
+
+    base = default_rig()
+    rig = Rig(base.left, base.right, np.eye(3), np.array([-100.0, 0.0, 0.0]))   # centre: x = +50 mm
+    down = np.diag([1.0, -1.0, -1.0])
+    path = tmp_path / "hold.rrd"
+    with Recorder.open(path, "track") as rec:
+        rec.log_static_setup(dump_rig(rig), None, None, "[servo]\nhover_mm = 600.0\n", 0)
+        img = np.zeros((8, 8, 3), np.uint8)
+        for k, truth in enumerate([(50, 0, 400), (50, 30, 360), None]):
+            rec.log_frame(k, 0.1 * k, img, img, T_base_left=make_pose(down, [0, 0, 1000.0]))
+            if truth is not None:
+                rec.log_truth(k, 0.1 * k, make_pose(down, np.array(truth, dtype=float)), (20, 10))
+    # rig centre (50, 0, 1000); wanted 600 mm above the truth: (50, 0, 1000) -> 0 mm,
+    # (50, 30, 960) -> |(0, -30, 40)| = 50 mm; frame 2 has no truth
+    assert run_metrics(read_recording(path))["hold_err_mm"] == pytest.approx(np.sqrt(2500 / 2))

@@ -468,6 +468,10 @@ def run_metrics(rec: Recording) -> dict[str, float]:
     heading_err_deg   RMS heading difference (model x axis in the base xy plane, wrapped)
     tilt_err_deg      RMS difference of tilt (model z axis from the vertical)
     size_err_mm       RMS over found frames of the mean |size_est - size_true| of the 2 sides
+    hold_err_mm       servo: RMS over frames with truth and a camera pose of the distance from
+                      the rig's centre (midpoint of the optical centres, from T_base_left and the
+                      recorded rig) to where the servo law wants it, [servo] hover_mm straight
+                      above the TRUE target; all frames, the approach included
     """
     nan = float("nan")
     est = rec.estimates
@@ -512,7 +516,30 @@ def run_metrics(rec: Recording) -> dict[str, float]:
     m["heading_err_deg"] = rms(head, 180 / math.pi)
     m["tilt_err_deg"] = rms(tilt, 180 / math.pi)
     m["size_err_mm"] = rms(size)
+    m["hold_err_mm"] = rms(_hold_errors(rec, truth))
     return m
+
+
+def _hold_errors(rec: Recording, truth: dict[int, TruthRecord]) -> list[float]:
+    """Per frame |rig centre - (true target + hover_mm up)| (mm), see run_metrics."""
+    import tomllib
+    try:
+        rig = rec.setup.rig()
+        hover = float(tomllib.loads(rec.setup.config_toml or "")["servo"]["hover_mm"])
+    except (KeyError, TypeError, ValueError, InputError):
+        return []
+    if rig is None:
+        return []
+    from photoservo.servo.session import left_centre
+    centre = left_centre(rig)
+    out = []
+    for f in rec.frames:
+        tr = truth.get(f.index)
+        if tr is None or f.T_base_left is None:
+            continue
+        c = f.T_base_left[:3, :3] @ centre + f.T_base_left[:3, 3]
+        out.append(float(np.linalg.norm(c - tr.T_base_target[:3, 3] - np.array([0.0, 0.0, hover]))))
+    return out
 
 
 METRICS: tuple[tuple[str, str, str], ...] = (
@@ -528,6 +555,7 @@ METRICS: tuple[tuple[str, str, str], ...] = (
     ("heading_err_deg", "heading error (deg RMS)", "{:.2f}"),
     ("tilt_err_deg", "tilt error (deg RMS)", "{:.2f}"),
     ("size_err_mm", "size error (mm RMS)", "{:.2f}"),
+    ("hold_err_mm", "hold error vs truth (mm RMS)", "{:.1f}"),
 )
 
 
