@@ -19,6 +19,7 @@ Live status on stderr; Ctrl-C stops the arm in a controlled way and closes the r
 Examples:
     photoservo track --sim --duration 20
     photoservo track --sim --duration 20 --collect --set sim.drift_mm_s=[20.0,10.0]
+    photoservo track --sim --world-from logs/X_track.rrd --set servo.k_position=1.0   # same world, new gain
     photoservo track --rig rig.toml --photo squid.jpg --port /dev/ttyUSB0 --set cameras.kind=\\"devices\\" ...
 """
 
