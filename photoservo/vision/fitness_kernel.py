@@ -43,7 +43,9 @@ def _plane_map(R, t, alpha, rig_R, rig_T, cam, right, a):  # pragma: no cover - 
                 a[r, c] = rig_R[r, 0] * M[0, c] + rig_R[r, 1] * M[1, c] + rig_R[r, 2] * M[2, c]
             a[r, 2] += rig_T[r]
     else:
-        a[:, :] = M
+        for r in range(3):
+            for c in range(3):
+                a[r, c] = M[r, c]
     if cam[14] == 0.0:
         for c in range(3):
             x, y, z = a[0, c], a[1, c], a[2, c]
@@ -190,11 +192,13 @@ def counts_serial(R, t, alpha, rig_R, rig_T, cam_l, cam_r, inner_uv, inner_hue, 
     P = R.shape[0]
     u, v, n_in = _split_points(inner_uv, outer_uv)
     counts = np.zeros((P, 2, 5), dtype=np.int64)
-    for p in range(P):
-        _camera_counts(R[p], t[p], alpha[p], rig_R, rig_T, cam_l, False, u, v, n_in, inner_hue,
-                       target_hues, hue_l, tol, counts[p, 0])
-        _camera_counts(R[p], t[p], alpha[p], rig_R, rig_T, cam_r, True, u, v, n_in, inner_hue,
-                       target_hues, hue_r, tol, counts[p, 1])
+    for job in range(2 * P):  # one call site: the kernel is compiled (and inlined) once
+        p = job // 2
+        c = job % 2
+        cam = cam_l if c == 0 else cam_r
+        hue = hue_l if c == 0 else hue_r
+        _camera_counts(R[p], t[p], alpha[p], rig_R, rig_T, cam, c == 1, u, v, n_in, inner_hue,
+                       target_hues, hue, tol, counts[p, c])
     return counts
 
 
@@ -207,12 +211,11 @@ def counts_parallel(R, t, alpha, rig_R, rig_T, cam_l, cam_r, inner_uv, inner_hue
     counts = np.zeros((P, 2, 5), dtype=np.int64)
     for job in prange(2 * P):
         p = job // 2
-        if job % 2 == 0:
-            _camera_counts(R[p], t[p], alpha[p], rig_R, rig_T, cam_l, False, u, v, n_in, inner_hue,
-                           target_hues, hue_l, tol, counts[p, 0])
-        else:
-            _camera_counts(R[p], t[p], alpha[p], rig_R, rig_T, cam_r, True, u, v, n_in, inner_hue,
-                           target_hues, hue_r, tol, counts[p, 1])
+        c = job % 2
+        cam = cam_l if c == 0 else cam_r
+        hue = hue_l if c == 0 else hue_r
+        _camera_counts(R[p], t[p], alpha[p], rig_R, rig_T, cam, c == 1, u, v, n_in, inner_hue,
+                       target_hues, hue, tol, counts[p, c])
     return counts
 
 
