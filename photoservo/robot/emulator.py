@@ -120,6 +120,7 @@ class BridgeModel:
         self.accepted = 0
         self.refused = 0
         self.refusals: dict[str, int] = {}  # refused setpoints by NACK error name
+        self.watchdog_stops = 0  # controlled stops for want of setpoints
         self.rx_crc_errors = 0
         self.t_tick = now  # bridge time of the last tick: when q, dq were "measured"
 
@@ -232,6 +233,7 @@ class BridgeModel:
             silence = now - self.t_last_setpoint
             if self.q_sp is not None and silence > self.params.watchdog_periods * T:
                 self.watchdog_fired = True
+                self.watchdog_stops += 1
                 self._begin_stop(disable=False)
             if silence > self.params.brake_after_s:
                 self._brake(P.Fault.SILENCE)

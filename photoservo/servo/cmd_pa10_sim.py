@@ -78,7 +78,8 @@ def run(args: argparse.Namespace) -> int:
         for s, h in old.items():
             signal.signal(s, h)
     d, m = emu.decoder, emu.model
-    print(f"pa10-sim: stopped; setpoints accepted {m.accepted}, refused {m.refused}; frames dropped "
+    print(f"pa10-sim: stopped; setpoints accepted {m.accepted}, refused {m.refused}; watchdog stops "
+          f"{m.watchdog_stops}; frames dropped "
           f"(CRC/COBS/length) {d.errors}, resyncs {d.resyncs}; states sent {emu.states_sent}, "
           f"skipped (line busy) {emu.states_skipped}", file=sys.stderr)
     return 0
