@@ -358,6 +358,10 @@ class FaultInjector:
             out += self._queue.popleft()[1]
         return bytes(out)
 
+    def queued_bytes(self) -> int:
+        """Bytes accepted by push() and not yet released by pop()."""
+        return sum(len(b) for _, b in self._queue)
+
     def next_release(self) -> float | None:
         return self._queue[0][0] if self._queue else None
 
@@ -555,7 +559,7 @@ class Emulator:
                     self.model.tick(next_tick)
                     n_tick += 1
                     if n_tick % state_every == 0 and not silent:
-                        if len(tx_buf) + self._queued() > frame_len:
+                        if len(tx_buf) + self.tx_faults.queued_bytes() > frame_len:
                             self.states_skipped += 1  # line still busy with the last one
                         else:
                             self._send(self.model.report(), now)
@@ -593,6 +597,3 @@ class Emulator:
                 time.sleep(min(timeout, 0.005))
             else:
                 select.select([master], [], [], timeout)
-
-    def _queued(self) -> int:
-        return sum(len(b) for _, b in self.tx_faults._queue)
