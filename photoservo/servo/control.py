@@ -85,7 +85,7 @@ def desired_camera_pose(
     if x_c @ R_base_cam_now[:, 0] < 0:
         x_c = -x_c
     z_c = -Z_UP  # optical axis down
-    y_c = np.cross(z_c, x_c)
+    y_c = _cross(z_c, x_c)
     R_des = np.column_stack([x_c, y_c, z_c])
     offset = np.zeros(3) if T_left_centre is None else np.asarray(T_left_centre, dtype=float)
     p_centre = p_target + hover_mm * Z_UP
@@ -115,7 +115,12 @@ def camera_twist(e: np.ndarray, v_target: np.ndarray, params: ServoParams) -> tu
 def flange_twist(v_cam: np.ndarray, w: np.ndarray, p_cam: np.ndarray, p_flange: np.ndarray) -> np.ndarray:
     """Rigid-body transfer of a twist from the camera origin to the flange origin (base frame):
     v_f = v_c + ω × (p_f − p_c), ω unchanged. Returns the 6-vector [v_f (mm/s); ω (rad/s)]."""
-    return np.concatenate([v_cam + np.cross(w, p_flange - p_cam), w])
+    return np.concatenate([v_cam + _cross(w, p_flange - p_cam), w])
+
+
+def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """a × b for 3-vectors, written out: np.cross costs ~0.1 ms, a tenth of a control period."""
+    return np.array([a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]])
 
 
 def _clip_norm(x: np.ndarray, cap: float) -> np.ndarray:

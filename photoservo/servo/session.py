@@ -96,7 +96,8 @@ class Controller:
     def step(self, now: float, q: np.ndarray, dq: np.ndarray, track: Track | None) -> ControlInfo:
         p = self.params
         dt = self.motion.dt
-        T_base_cam = pa10.fk(q) @ self.T_flange_left
+        T_base_flange = pa10.fk(q)
+        T_base_cam = T_base_flange @ self.T_flange_left
         stop = ""
         if track is None or track.T_base_model is None:
             stop = "no target"
@@ -123,7 +124,6 @@ class Controller:
             yaw = yaw_error_deg(T_base_cam, T_des)
             self._update_hold(now, float(np.linalg.norm(e_p)), yaw)
             v, w = camera_twist(e, track.velocity_mm_s, p)
-            T_base_flange = pa10.fk(q)
             twist = flange_twist(v, w, T_base_cam[:3, 3], T_base_flange[:3, 3])
             dq_target = pa10.dls_step(q, twist, p.damping, k_null=0.5)
             sp = self.motion.velocity_step(q, dq, dq_target)
