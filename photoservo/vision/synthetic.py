@@ -480,7 +480,7 @@ def render_view(scene: Scene, cam: Camera, T_world_cam: np.ndarray, t: float = 0
     reference `_shade_water` (identical model; textures sampled without OpenCV's 1/32-texel
     weight quantisation, so the two differ by well under 1 DN on average).
 
-    water_stride > 1 is the fast path for live simulation (~5x less CPU at 4): the water is
+    water_stride > 1 is the fast path for live simulation (~7x less CPU at 4, benchmarks/render_speed.py): the water is
     shaded on a grid of one ray per stride x stride block (`coarse_rays(rays, stride)`, or
     `water_rays` when precomputed) and upsampled bilinearly, so waves, mottle and glints keep
     their look but not their finest detail; floaters and foam are still drawn at full resolution
