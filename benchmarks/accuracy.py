@@ -22,7 +22,9 @@ the box centre up to 30 mm, any heading, tilt <= 60 deg, alpha within x/รท 2) โ€
 real-coded GA without blob seeding (one island over the whole volume).
 
 Threshold calibration (printed, and in the JSON): `found` is decided on the detection score
-(the fitness with the two cameras combined by their minimum) of the best candidate. The scores
+(the fitness with the two cameras combined by their minimum) of the best candidate, together
+with the outline check (share of outer points on target hue): its limit is suggested midway
+between the worst target and the nearest look-alike above it whose score alone would pass. The scores
 of the empty scenes, of the look-alike scenes and of the targets are compared; the suggested
 threshold lies midway between the worst empty scene and the targets' 5th percentile, with the
 false-positive and miss rates it would give. configs/default.toml takes that value.
@@ -76,6 +78,7 @@ def errors(est, truth: dict, cpu: float = math.nan) -> dict:
     z = truth["position_mm"][2]
     row = {"found": bool(est.found), "distance_mm": z, "tilt_true_deg": truth["tilt_deg"],
            "same_photo": truth["same_photo"], "fitness": est.fitness, "detection_score": est.detection_score,
+           "outer_on_target": est.candidates[0]["outer_on_target"] if est.candidates else None,
            "generations": est.generations,
            "evaluations": est.evaluations, "seconds": est.seconds, "cpu_seconds": cpu}
     if not est.found:
@@ -214,6 +217,7 @@ def main(argv: list[str] | None = None) -> int:
         est = estimate(model, sc.left, sc.right, sc.rig, cfg.ga, cfg.estimator, cfg.fitness, seed=j)
         nulls.append({"seed": 1500 + j, "look_alike": distractor, "found": bool(est.found),
                       "fitness": est.fitness, "detection_score": est.detection_score, "seconds": est.seconds,
+                      "outer_on_target": est.candidates[0]["outer_on_target"] if est.candidates else None,
                       "distractors": [d["kind"] for d in sc.truth["distractors"]]})
         print(f"  null {j:3d} {'look-alike' if distractor else 'empty':<10}: {'FALSE POSITIVE' if est.found else 'not found'} "
               f"best score={est.detection_score if est.detection_score is not None else float('nan'):.3f} "
@@ -272,6 +276,18 @@ def main(argv: list[str] | None = None) -> int:
         calib["at_suggested"] = {"empty_fp_rate": float(np.mean(empty_s >= thr)),
                                  "look_alike_fp_rate": float(np.mean(look_s >= thr)) if len(look_s) else None,
                                  "target_miss_rate": float(np.mean(tgt_s < thr))}
+    # the outline check: share of outer points on target hue, targets against the look-alikes
+    # whose score alone would pass
+    thr_in_use = cfg.estimator.threshold
+    tgt_o = [r["outer_on_target"] for r in rows if r["success"] and r["outer_on_target"] is not None]
+    look_o = [n["outer_on_target"] for n in nulls if n["look_alike"] and n["outer_on_target"] is not None
+              and score(n["detection_score"]) >= thr_in_use]
+    calib["outline"] = {"limit_in_use": cfg.estimator.max_outer_on_target,
+                        "targets_max": max(tgt_o) if tgt_o else None,
+                        "look_alikes_passing_score": sorted(look_o)}
+    above = [o for o in look_o if tgt_o and o > max(tgt_o)]
+    if tgt_o and above:
+        calib["outline"]["suggested_limit"] = round((max(tgt_o) + min(above)) / 2, 3)
     fp = {"empty_scenes": len(fp_empty), "empty_false_positive_rate": float(np.mean(fp_empty)) if fp_empty else None,
           "look_alike_scenes": len(fp_look),
           "look_alike_false_positive_rate": float(np.mean(fp_look)) if fp_look else None}
@@ -285,6 +301,10 @@ def main(argv: list[str] | None = None) -> int:
           f"(threshold {cfg.estimator.threshold})")
     print(f"detection scores: empty water max {calib['empty_scores']['max']}, look-alikes max "
           f"{calib['look_alike_scores']['max']}, targets p5 {calib['target_scores']['p5']} min {calib['target_scores']['min']}")
+    ol = calib["outline"]
+    print(f"outline check (share of outer points on target hue): targets at most {ol['targets_max']}, look-alikes "
+          f"whose score passes: {ol['look_alikes_passing_score']}; limit in use {ol['limit_in_use']}, suggested "
+          f"{ol.get('suggested_limit')} (midway between the worst target and the nearest look-alike above it)")
     if "suggested_threshold" in calib:
         at = calib["at_suggested"]
         print(f"suggested detection threshold: {calib['suggested_threshold']} (midway between the worst empty scene "

@@ -154,3 +154,18 @@ def test_stereo_plane_fit_recovers_the_tilt(scene):
     _, tilt_after = heading_tilt_error(R, R2)
     assert tilt_before == pytest.approx(12.0) and tilt_after < 6.0
     assert abs(t2[2] - t[2]) < 0.02 * t[2]
+
+
+def test_detection_needs_both_cameras_and_the_outline(scene):
+    """`detect`: the true pose passes; a model shrunk inside the creature (its outer band lands on
+    target hue) fails the outline check even where its inner points all agree."""
+    from photoservo.vision.estimator import Candidate, detect
+
+    sc, model = scene
+    R, t, alpha = truth(sc)
+    frame = stereo_hue(sc.left, sc.right, CFG.fitness)
+    ok = detect(Candidate(R, t, alpha, 0.0, 0, "truth"), model, frame, sc.rig, CFG.fitness, CFG.estimator)
+    assert ok.passed and ok.score >= CFG.estimator.threshold and ok.outer_on_target < 0.05
+    shrunk = detect(Candidate(R, t, alpha * 1.6, 0.0, 0, "shrunk"), model, frame, sc.rig, CFG.fitness, CFG.estimator)
+    assert not shrunk.passed and shrunk.outer_on_target > CFG.estimator.max_outer_on_target
+    assert shrunk.confidence < ok.confidence

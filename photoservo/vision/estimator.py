@@ -28,11 +28,10 @@ apparent scale s from the blob area and two heading hypotheses from the blob's p
 Each pair seeds one GA island searching a window around it; an optional unseeded island
 searches the whole volume. Every island stops when converged (`Convergence`), then tries the
 pose's look-alike twins (planar-ambiguity mirror, heading + 180 deg). Each island's best is a
-candidate, scored for detection by `detection_score` (the fitness with the cameras combined by
-their minimum: both must see it); the highest is the estimate, the others the candidate list.
-`found` is detection_score >= the detection threshold (calibrated on empty and look-alike
-scenes, see benchmarks/accuracy.py), and
-confidence = 1 / (1 + exp(-(detection_score - threshold) / confidence_scale)).
+candidate, tested by `detect` (`Detection`: the fitness with the cameras combined by their
+minimum — both must see it — against the threshold calibrated on empty and look-alike scenes in
+benchmarks/accuracy.py, and the outline check: few outer points on target hue); the best passing
+candidate is the estimate, the others the candidate list, and `found` is whether one passed.
 
 Tracking (`PoseSearch`): one persistent GA; `set_frame` for a new frame, `set_window` around a
 predicted pose, `reset_full` to re-acquire, `seed` to inject poses, `step(n)`.
@@ -50,7 +49,14 @@ import cv2
 import numpy as np
 
 from photoservo.errors import InputError
-from photoservo.vision.fitness import FitnessParams, StereoHue, fitness, stereo_hue
+from photoservo.vision.fitness import (
+    OUT_MISMATCH,
+    FitnessParams,
+    StereoHue,
+    counts_reference,
+    fitness,
+    stereo_hue,
+)
 from photoservo.vision.ga import GA, GAParams, Region
 from photoservo.vision.photo_model import HUE_BINS, PhotoModel
 from photoservo.vision.pose import (
@@ -94,6 +100,7 @@ class EstimatorParams:
     rotation_tol_deg: float  # ... best rotation turned less than this (deg)
     alpha_tol: float  # ... best alpha changed by less than this fraction
     threshold: float  # detection threshold (found = detection_score >= threshold)
+    max_outer_on_target: float  # detection also needs at most this share of outer points on target hue
     confidence_scale: float  # width of the logistic confidence around the threshold
 
     def validate(self, where: str) -> None:
@@ -684,44 +691,66 @@ def estimate(model: PhotoModel, left_bgr: np.ndarray, right_bgr: np.ndarray, rig
     for (name, search), c in zip(islands, firsts):
         evaluations += search.ga.evaluations
         if np.isfinite(c.fitness):
-            results.append((detection_score(c, model, frame, rig, fit_params),
+            results.append((detect(c, model, frame, rig, fit_params, p),
                             Candidate(c.R, c.position_mm, c.alpha, c.fitness, c.generations, name)))
-    results.sort(key=lambda sc: (-sc[0], -sc[1].fitness))
-    cands = tuple(_candidate_json(c, d, model, p) for d, c in results)
+    results.sort(key=lambda dc: (-dc[0].passed, -dc[0].score, -dc[1].fitness))
+    cands = tuple(_candidate_json(c, d, model) for d, c in results)
     seconds = time.perf_counter() - t0
-    if not results or results[0][0] < p.threshold:
-        d, best = results[0] if results else (-math.inf, None)
+    if not results or not results[0][0].passed:
+        d, best = results[0] if results else (None, None)
         return Estimate(found=False, position_mm=None, rotation=None, alpha_px_per_mm=None, size_mm=None,
                         fitness=None if best is None else float(best.fitness),
                         generations=sum(s.ga.generation for _, s in islands), seconds=seconds,
-                        confidence=confidence(d, p), evaluations=evaluations, candidates=cands,
-                        detection_score=None if best is None else float(d))
+                        confidence=0.0 if d is None else d.confidence, evaluations=evaluations, candidates=cands,
+                        detection_score=None if d is None else d.score)
     d, best = results[0]
     return Estimate(found=True, position_mm=best.position_mm, rotation=best.R, alpha_px_per_mm=best.alpha,
                     size_mm=model.size_mm(best.alpha), fitness=best.fitness, generations=best.generations,
-                    seconds=seconds, confidence=confidence(d, p), evaluations=evaluations,
-                    candidates=cands, detection_score=float(d))
+                    seconds=seconds, confidence=d.confidence, evaluations=evaluations,
+                    candidates=cands, detection_score=d.score)
 
 
-def detection_score(c: Candidate, model: PhotoModel, frame: StereoHue, rig: Rig, fit_params: FitnessParams) -> float:
-    """The score `found` is decided on: the stereo fitness of the candidate with the two cameras
-    combined by their minimum (`[fitness] combine = "min"`), so a look-alike seen by one camera
-    only, or a pose that fits one image and not the other, cannot pass on the strength of one
-    camera (the GA itself optimises the configured combination)."""
+@dataclass(frozen=True)
+class Detection:
+    """Is a candidate the target? `score`: the stereo fitness with the two cameras combined by
+    their minimum (`[fitness] combine = "min"`), so a look-alike seen by one camera only, or a
+    pose that fits one image and not the other, cannot pass on the strength of one camera (the GA
+    itself optimises the configured combination). `outer_on_target`: the largest share, over the
+    two cameras, of outer points S_out landing on target hue — the creature's outline must end
+    where the model's does (a buoy or another species of the same colour usually spills over).
+    passed = score >= threshold and outer_on_target <= max_outer_on_target;
+    confidence = logistic((score - threshold) / confidence_scale)
+                 · logistic((max_outer_on_target - outer_on_target) / 0.02)."""
+
+    score: float
+    outer_on_target: float
+    passed: bool
+    confidence: float
+
+
+def detect(c: Candidate, model: PhotoModel, frame: StereoHue, rig: Rig, fit_params: FitnessParams,
+           p: EstimatorParams) -> Detection:
+    """The detection test of one candidate (see `Detection`)."""
     strict = dataclasses.replace(fit_params, combine="min")
-    return float(fitness(c.R, c.position_mm, c.alpha, model, frame, rig, strict)[0])
+    score = float(fitness(c.R, c.position_mm, c.alpha, model, frame, rig, strict)[0])
+    counts = counts_reference(c.R, c.position_mm, c.alpha, model, frame, rig, fit_params)[0]
+    outer = float(counts[:, OUT_MISMATCH].max()) / max(1, len(model.outer_uv))
+    passed = score >= p.threshold and outer <= p.max_outer_on_target
+    conf = confidence(score, p) / (1.0 + math.exp(-(p.max_outer_on_target - outer) / 0.02))
+    return Detection(score=score, outer_on_target=outer, passed=bool(passed), confidence=conf)
 
 
-def _candidate_json(c: Candidate, score: float, model: PhotoModel, p: EstimatorParams) -> dict:
+def _candidate_json(c: Candidate, d: Detection, model: PhotoModel) -> dict:
     return {
-        "found": bool(score >= p.threshold),
+        "found": bool(d.passed),
         "position_mm": [float(x) for x in c.position_mm],
         "rotation": [[float(x) for x in r] for r in c.R],
         "alpha_px_per_mm": float(c.alpha),
         "size_mm": [float(x) for x in model.size_mm(c.alpha)],
         "fitness": round(float(c.fitness), 6),
         "generations": int(c.generations),
-        "detection_score": round(float(score), 6),
-        "confidence": round(confidence(score, p), 4),
+        "detection_score": round(d.score, 6),
+        "outer_on_target": round(d.outer_on_target, 4),
+        "confidence": round(d.confidence, 4),
         "source": c.source,
     }
