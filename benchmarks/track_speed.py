@@ -26,7 +26,6 @@ import numpy as np
 from photoservo.fileio import write_text_atomic
 from photoservo.robot import pa10
 from photoservo.robot.emulator import Emulator
-from photoservo.robot.link import Link
 from photoservo.servo.config import load_config
 from photoservo.servo.recording import Recorder
 from photoservo.servo.session import Frame, Scores, SimCameras, _vision_step, build_sim, run_realtime
@@ -69,16 +68,15 @@ def prerendered(cfg, n_frames: int, record: bool) -> dict:
     return out
 
 
-def live(cfg, seconds: float) -> dict:
+def live(cfg, seconds: float, rt_priority: int | None = None) -> dict:
     sim = build_sim(cfg)
     emu = Emulator(cfg.emulator, sim.limits, q0=sim.q0)
     path = emu.start()
     try:
-        with Link(path, cfg.link) as link:
-            t0 = time.monotonic()
-            cams = SimCameras(sim.scene, emu, sim.rig.T_flange_left(), cfg.sim.camera_fps, t0, cfg.sim.lr_skew_s)
-            sc = run_realtime(cfg, seconds, arm=link, cameras=cams, model=sim.scene.model, rig=sim.rig,
-                              scene=sim.scene, t0=t0, settle_s=min(5.0, seconds / 2))
+        t0 = time.monotonic()
+        cams = SimCameras(sim.scene, emu, sim.rig.T_flange_left(), cfg.sim.camera_fps, t0, cfg.sim.lr_skew_s)
+        sc = run_realtime(cfg, seconds, port=path, cameras=cams, model=sim.scene.model, rig=sim.rig,
+                          scene=sim.scene, t0=t0, settle_s=min(5.0, seconds / 2), rt_priority=rt_priority)
     finally:
         emu.stop()
     late = np.asarray(sc.timings_ms.get("control_late", [np.nan]))

@@ -55,6 +55,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     view = p.add_mutually_exclusive_group()
     view.add_argument("--view", action="store_true", help="spawn the Rerun viewer while recording")
     view.add_argument("--connect", metavar="URL", help="stream to a running Rerun viewer as well")
+    p.add_argument("--rt-priority", type=int, metavar="N",
+                   help="run the control loop with SCHED_FIFO priority N (1..99; needs the permission)")
     p.add_argument("--seed", type=int, default=None, help="tracker seed (default 0; with --world-from the recorded one)")
     p.add_argument("--world-from", metavar="REC.rrd",
                    help="simulation: the world, config and seeds of a simulated recording, closed loop with "
@@ -103,6 +105,8 @@ def run(args: argparse.Namespace) -> int:
     cfg = load_config(args.config, args.overrides)
     if args.duration <= 0:
         raise InputError(f"--duration {args.duration}: must be > 0 s")
+    if args.rt_priority is not None and not 1 <= args.rt_priority <= 99:
+        raise InputError(f"--rt-priority {args.rt_priority}: must be in 1..99")
     hardware = bool(args.port) or cfg.cameras.kind != "none"
     if hardware and args.sim:
         raise InputError("--sim cannot be combined with --port or a configured [cameras] source")
@@ -160,7 +164,6 @@ def _recording_files(rec) -> str:
 
 def _run_sim(args, cfg) -> int:
     from photoservo.robot.emulator import Emulator
-    from photoservo.robot.link import Link
     from photoservo.servo.session import SimCameras, build_sim, run_lockstep, run_realtime
 
     if args.lockstep:  # the recorded effective config then says how the run was clocked (replay reads it)
@@ -178,13 +181,13 @@ def _run_sim(args, cfg) -> int:
             emu = Emulator(cfg.emulator, sim.limits, q0=sim.q0)
             path = emu.start()
             try:
-                with Link(path, cfg.link) as link:
-                    t0 = time.monotonic()
-                    cams = SimCameras(sim.scene, emu, sim.rig.T_flange_left(), cfg.sim.camera_fps, t0,
-                                      cfg.sim.lr_skew_s)
-                    sc = run_realtime(cfg, args.duration, arm=link, cameras=cams, model=sim.scene.model,
-                                      rig=sim.rig, collect=args.collect, no_motion=args.no_motion,
-                                      recorder=rec, status=status, seed=args.seed, scene=sim.scene, t0=t0)
+                t0 = time.monotonic()
+                cams = SimCameras(sim.scene, emu, sim.rig.T_flange_left(), cfg.sim.camera_fps, t0,
+                                  cfg.sim.lr_skew_s)
+                sc = run_realtime(cfg, args.duration, port=path, cameras=cams, model=sim.scene.model,
+                                  rig=sim.rig, collect=args.collect, no_motion=args.no_motion,
+                                  recorder=rec, status=status, seed=args.seed, scene=sim.scene, t0=t0,
+                                  rt_priority=args.rt_priority)
             finally:
                 emu.stop()
     finally:
@@ -196,7 +199,6 @@ def _run_sim(args, cfg) -> int:
 
 def _run_hardware(args, cfg) -> int:
     from photoservo.fileio import read_image
-    from photoservo.robot.link import Link
     from photoservo.servo.session import ReaderCameras, run_realtime
     from photoservo.vision.photo_model import build_photo_model
     from photoservo.vision.rig import load_rig
@@ -218,10 +220,10 @@ def _run_hardware(args, cfg) -> int:
     try:
         if rec is not None:
             _setup_static(rec, cfg, rig, photo, model, args.seed, {})
-        with Link(args.port, cfg.link) as link, LatestFrameReader(make_source(src_cfg)) as reader:
-            sc = run_realtime(cfg, args.duration, arm=link, cameras=ReaderCameras(reader), model=model, rig=rig,
-                              collect=args.collect, no_motion=args.no_motion, recorder=rec,
-                              status=status, seed=args.seed)
+        with LatestFrameReader(make_source(src_cfg)) as reader:
+            sc = run_realtime(cfg, args.duration, port=args.port, cameras=ReaderCameras(reader), model=model,
+                              rig=rig, collect=args.collect, no_motion=args.no_motion, recorder=rec,
+                              status=status, seed=args.seed, rt_priority=args.rt_priority)
     finally:
         status.close()
         if rec is not None:

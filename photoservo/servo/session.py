@@ -20,8 +20,10 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import multiprocessing
 import threading
 import time
+from collections import deque
 from dataclasses import dataclass, field
 from typing import Callable, Literal
 
@@ -30,7 +32,7 @@ import numpy as np
 from photoservo.robot import pa10
 from photoservo.robot.pa10 import make_pose, pose_error
 from photoservo.robot import protocol as P
-from photoservo.robot.clock import Rate
+from photoservo.robot.clock import Rate, set_realtime
 from photoservo.servo.config import Config
 from photoservo.servo.control import (
     ServoParams,
@@ -40,7 +42,7 @@ from photoservo.servo.control import (
     yaw_error_deg,
 )
 from photoservo.servo.motion import Motion, Setpoint
-from photoservo.servo.world import LockstepArm, SimScene, sim_hand_eye
+from photoservo.servo.world import LockstepArm, SimScene, TargetMotion, sim_hand_eye
 from photoservo.vision.fitness import project_model, stereo_hue
 from photoservo.vision.rig import Rig
 from photoservo.vision.synthetic import synthetic_rig
@@ -364,15 +366,20 @@ def _vision_step(fr: Frame, tracker: Tracker, cfg: Config, sc: Scores, recorder,
 
 
 def _score_hold(sc: Scores, ctrl: Controller, scene: SimScene, info: ControlInfo, now: float,
-                settle_s: float, centre: np.ndarray, T_true_time: float | None = None) -> None:
+                settle_s: float, centre: np.ndarray) -> None:
     """Camera pose error against the desired pose of the TRUE target (simulation only); `now`
     is scene time (s)."""
-    T_true = scene.motion.pose(now if T_true_time is None else T_true_time)
-    T_des = desired_camera_pose(T_true, scene.size_mm(), ctrl.height_mm, info.T_base_cam[:3, :3], centre)
+    _score_hold_truth(sc, ctrl, scene.motion, scene.size_mm(), info, now, settle_s, centre, scene.distractor_motion)
+
+
+def _score_hold_truth(sc: Scores, ctrl: Controller, motion: TargetMotion, size_mm: tuple[float, float],
+                      info: ControlInfo, now: float, settle_s: float, centre: np.ndarray,
+                      distractor: TargetMotion | None = None) -> None:
+    T_des = desired_camera_pose(motion.pose(now), size_mm, ctrl.height_mm, info.T_base_cam[:3, :3], centre)
     e_p = pose_error(T_des, info.T_base_cam)[:3]
-    if scene.distractor_motion is not None:
+    if distractor is not None:
         c = info.T_base_cam[:3, :3] @ centre + info.T_base_cam[:3, 3]
-        d = scene.distractor_motion.pose(now)[:3, 3]
+        d = distractor.pose(now)[:3, 3]
         sc.distractor_min_mm = min(sc.distractor_min_mm, float(np.linalg.norm((c - d)[:2])))
     if now >= settle_s and ctrl.phase == "servo":
         err = float(np.linalg.norm(e_p))
@@ -429,68 +436,181 @@ class ReaderCameras:
         return None if f is None else (f.index, f.left, f.right, f.t_left, f.t_right)
 
 
-def run_realtime(cfg: Config, duration_s: float, *, arm, cameras, model, rig: Rig,
+class StateHistory:
+    """Recent joint states (t, q, dq) on the monotonic clock, for where the cameras were at a
+    frame's capture time: linear interpolation between the two states around t."""
+
+    def __init__(self, keep_s: float = 2.0) -> None:
+        self.keep_s = keep_s
+        self._t: deque[float] = deque()
+        self._q: deque[np.ndarray] = deque()
+        self._lock = threading.Lock()
+
+    def append(self, t: float, q: np.ndarray) -> None:
+        with self._lock:
+            self._t.append(t)
+            self._q.append(np.asarray(q, float))
+            while self._t and self._t[0] < t - self.keep_s:
+                self._t.popleft()
+                self._q.popleft()
+
+    def q_at(self, t: float) -> np.ndarray:
+        """Joint positions at time t (rad). Raises LookupError outside the kept history (a
+        little past the newest state is allowed: 10 ms)."""
+        with self._lock:
+            ts, qs = list(self._t), list(self._q)
+        if not ts or t < ts[0] or t > ts[-1] + 0.01:
+            raise LookupError(f"no joint state around time {t:.4f}")
+        i = int(np.searchsorted(ts, t, side="right"))
+        if i >= len(ts):
+            return qs[-1]
+        a, b = ts[i - 1], ts[i]
+        w = 0.0 if b == a else (t - a) / (b - a)
+        return qs[i - 1] + w * (qs[i] - qs[i - 1])
+
+
+@dataclass(frozen=True)
+class ControlJob:
+    """What the control process needs, picklable (it starts with `spawn`)."""
+
+    cfg: Config
+    port: str
+    T_flange_left: np.ndarray
+    centre: np.ndarray
+    collect: bool
+    no_motion: bool
+    motion_truth: TargetMotion | None  # simulation: scores the hold against the true target
+    size_truth: tuple[float, float] | None
+    t0: float
+    settle_s: float
+    rt_priority: int | None
+
+
+def control_process(job: ControlJob, conn, stop) -> None:
+    """The control loop in its own process (issue 3's measurements: a thread next to the vision
+    work cannot hold 250 Hz on 2 cores; a process with SCHED_FIFO can): owns the link, runs
+    `Controller` at the control rate, takes tracks from `conn`, sends back each tick's joint state
+    and decision, and ends — on `stop`, a fault or an exception — with a controlled stop and the
+    servo off. Its last message is ("done", Scores, collected)."""
+    from photoservo.robot.link import Link
+
+    cfg = job.cfg
+    sc = Scores()
+    ctrl = Controller(cfg.servo, Motion(cfg.motion, pa10.load_limits()), job.T_flange_left, job.centre,
+                      collect=job.collect, no_motion=job.no_motion)
+    n_events = 0
+    try:
+        if job.rt_priority is not None:
+            try:
+                set_realtime(job.rt_priority)
+            except OSError as e:  # not a fault: the loop runs, only less steadily (events say so)
+                ctrl.events.append((time.monotonic(), f"real-time priority {job.rt_priority} refused "
+                                                      f"({e.strerror}); control runs without it"))
+        with Link(job.port, cfg.link) as link:
+            link.wait_state()
+            if not job.no_motion:
+                link.enable()
+            conn.send(("ready",))
+            rate = Rate(cfg.motion.rate_hz)
+            track, tool = None, False
+            try:
+                while not stop.is_set():
+                    now = time.monotonic()
+                    while conn.poll():
+                        track = conn.recv()
+                    st = link.state()
+                    info = ctrl.step(now, st.q, st.dq, track)
+                    if not job.no_motion:
+                        link.send_setpoint(info.setpoint.q, info.setpoint.dq, now)
+                        if info.tool != tool:
+                            link.tool(info.tool)
+                            tool = info.tool
+                    if job.motion_truth is not None:
+                        _score_hold_truth(sc, ctrl, job.motion_truth, job.size_truth, info, now - job.t0,
+                                          job.settle_s, job.centre)
+                    conn.send(("tick", now, st.t, st.q, info.setpoint.q, info.setpoint.dq, info.T_base_cam_des,
+                               info.phase, info.position_error_mm, info.yaw_error_deg, info.stop_reason,
+                               ctrl.events[n_events:]))
+                    n_events = len(ctrl.events)
+                    sc.time("control_ms", 1e3 * (time.monotonic() - now))
+                    sc.time("control_late", 1e3 * rate.sleep())
+            finally:
+                if not job.no_motion:
+                    _controlled_stop(link, sc)
+    except Exception as e:  # noqa: BLE001 - a fault while moving: the arm is stopped, then reported
+        sc.faults.append(f"{type(e).__name__}: {e}")
+    finally:
+        sc.collected = ctrl.collected
+        try:
+            conn.send(("done", sc))
+        except (OSError, ValueError):
+            pass
+
+
+def run_realtime(cfg: Config, duration_s: float, *, port: str, cameras, model, rig: Rig,
                  collect: bool = False, no_motion: bool = False, recorder=None,
                  status: StatusFn | None = None, seed: int = 0, scene: SimScene | None = None,
-                 t0: float | None = None, settle_s: float = 5.0,
+                 t0: float | None = None, settle_s: float = 5.0, rt_priority: int | None = None,
                  stop_event: threading.Event | None = None) -> Scores:
-    """The real-time loop: a control thread at the control rate streams setpoints to `arm` (a
-    `robot.link.Link`, opened), the calling thread reads stereo frames from `cameras` (its
-    `read()` -> (index, left, right, t_left, t_right) on the monotonic clock), runs the tracker
-    and publishes the track. Any link fault or exception stops the arm (controlled stop) before
-    returning or raising. `scene` (simulation) scores hold accuracy against the truth."""
+    """The real-time session. The control loop (`control_process`) runs in its own process,
+    connected to the bridge at `port`; this process reads stereo frames from `cameras` (`read()`
+    -> (index, left, right, t_left, t_right) on the monotonic clock), places each at the joint
+    state of its capture time (streamed back by the control process), runs the tracker and sends
+    each track over. Stopping (duration, Ctrl-C, an error here or a fault there) ends with the
+    arm stopped and the servo off. `scene` (simulation) scores hold accuracy against the truth."""
     T_fl = rig.T_flange_left()
-    centre = left_centre(rig)
-    limits = pa10.load_limits()
-    ctrl = Controller(cfg.servo, Motion(cfg.motion, limits), T_fl, centre, collect=collect, no_motion=no_motion)
     tracker = Tracker(model, rig, cfg.tracker, cfg.ga, cfg.estimator, cfg.fitness, seed)
     sc = Scores()
     t0 = time.monotonic() if t0 is None else t0
     stop = stop_event or threading.Event()
-    lock = threading.Lock()
-    shared: dict = {"track": None, "info": None, "fault": ""}
+    ctx = multiprocessing.get_context("spawn")
+    parent, child = ctx.Pipe()
+    child_stop = ctx.Event()
+    job = ControlJob(cfg, port, T_fl, left_centre(rig), collect, no_motion,
+                     None if scene is None else scene.motion, None if scene is None else scene.size_mm(),
+                     t0, settle_s, rt_priority)
+    proc = ctx.Process(target=control_process, args=(job, child, child_stop), name="photoservo-control", daemon=True)
+    proc.start()
+    history = StateHistory()
+    latest: dict = {}
+    result: dict = {}
 
-    def control() -> None:
-        rate = Rate(cfg.motion.rate_hz)
-        tool = False
+    def receive() -> None:
+        """Drain the control process's messages: joint states, decisions, events, the result."""
         i = 0
-        try:
-            while not stop.is_set():
-                now = time.monotonic()
-                st = arm.state()
-                with lock:
-                    track = shared["track"]
-                info = ctrl.step(now, st.q, st.dq, track)
-                if not no_motion:
-                    arm.send_setpoint(info.setpoint.q, info.setpoint.dq, now)
-                    if info.tool != tool:
-                        arm.tool(info.tool)
-                        tool = info.tool
-                if scene is not None:
-                    _score_hold(sc, ctrl, scene, info, now - t0, settle_s, centre, T_true_time=now - t0)
-                with lock:
-                    shared["info"] = info
-                if recorder is not None and i % 5 == 0:
-                    recorder.log_arm(now - t0, st.q, info.setpoint.q, info.setpoint.dq)
-                    if info.T_base_cam_des is not None:
-                        recorder.log_desired(now - t0, info.T_base_cam_des)
+        while True:
+            try:
+                msg = parent.recv()
+            except (EOFError, OSError):
+                return
+            if msg[0] == "tick":
+                _, now, t_state, q, sp_q, sp_dq, T_des, phase, err, yaw, stop_reason, events = msg
+                history.append(t_state, q)
+                latest.update(t=now, phase=phase, err=err, yaw=yaw, stop=stop_reason)
+                if recorder is not None:
+                    for t_e, text in events:
+                        recorder.event(t_e - t0, text)  # the controller's clock is monotonic
+                    if i % 5 == 0:
+                        recorder.log_arm(now - t0, q, sp_q, sp_dq)
+                        if T_des is not None:
+                            recorder.log_desired(now - t0, T_des)
                 i += 1
-                sc.time("control_ms", 1e3 * (time.monotonic() - now))
-                late = rate.sleep()
-                sc.time("control_late", 1e3 * late)
-        except Exception as e:  # noqa: BLE001 - a fault while moving stops the arm, then reported
-            with lock:
-                shared["fault"] = f"{type(e).__name__}: {e}"
-            stop.set()
+            elif msg[0] == "ready":
+                latest["ready"] = True
+            elif msg[0] == "done":
+                result["scores"] = msg[1]
+                stop.set()
+                return
 
-    thread = threading.Thread(target=control, name="control", daemon=True)
-    arm.wait_state()  # the first state report: the control loop starts from a measured state
-    if not no_motion:
-        arm.enable()
-    thread.start()
+    rx = threading.Thread(target=receive, name="control-rx", daemon=True)
+    rx.start()
     prev = None
-    n_events = 0
     try:
+        deadline = time.monotonic() + 30.0
+        while "ready" not in latest and not stop.is_set():  # the process imports, opens the link
+            if time.monotonic() > deadline:
+                raise RuntimeError("the control process did not start within 30 s")
+            time.sleep(0.01)
         while not stop.is_set() and time.monotonic() - t0 < duration_s:
             c0 = time.perf_counter()
             got = cameras.read()
@@ -499,39 +619,42 @@ def run_realtime(cfg: Config, duration_s: float, *, arm, cameras, model, rig: Ri
             k, left, right, t_l, t_r = got
             sc.time("capture", 1e3 * (time.perf_counter() - c0))
             try:
-                T_l = pa10.fk(arm.state_at(t_l).q) @ T_fl
+                T_l = pa10.fk(history.q_at(t_l)) @ T_fl
             except LookupError as e:  # no arm state for the capture time: cannot place the frame
                 sc.dropped_frames += 1
-                if sc.dropped_frames == 1:
-                    ctrl.events.append((time.monotonic() - t0, f"frame dropped: {e}"))
+                if recorder is not None and sc.dropped_frames == 1:
+                    recorder.event(time.monotonic() - t0, f"frame dropped: {e}")
                 continue
             fr = Frame(k, t_l - t0, t_r - t0, time.monotonic() - t0, left, right, T_l)
             track = _vision_step(fr, tracker, cfg, sc, recorder, scene)
-            track = _shift_time(track, t0)
-            with lock:
-                shared["track"] = track
-                info = shared["info"]
+            parent.send(_shift_time(track, t0))
             if track.status != prev:
                 sc.lost_events += track.status == "lost"
-                ctrl.events.append((fr.t_left, f"track {track.status}"))
-                prev = track.status
-            while n_events < len(ctrl.events):
                 if recorder is not None:
-                    recorder.event(ctrl.events[n_events][0], ctrl.events[n_events][1])
-                n_events += 1
+                    recorder.event(fr.t_left, f"track {track.status}")
+                prev = track.status
             sc.time("frame", 1e3 * (time.perf_counter() - c0))
-            if status is not None and info is not None:
-                d = _status_dict(time.monotonic() - t0, sc, track, info)
-                d["fps"] = 1e3 / float(np.median(sc.timings_ms["frame"][-30:]))
-                status(d)
+            if status is not None and "phase" in latest:
+                status({"t": time.monotonic() - t0, "frames": sc.frames, "found": track.found,
+                        "status": track.status, "fitness": track.fitness,
+                        "position_mm": None if track.T_base_model is None else track.T_base_model[:3, 3],
+                        "alpha": track.alpha, "error_mm": latest["err"], "yaw_deg": latest["yaw"],
+                        "phase": latest["phase"], "stop": latest["stop"],
+                        "fps": 1e3 / float(np.median(sc.timings_ms["frame"][-30:]))})
     finally:
-        stop.set()
-        thread.join(timeout=2.0)
-        if shared["fault"]:
-            sc.faults.append(shared["fault"])
-        if not no_motion:
-            _controlled_stop(arm, sc)
-        sc.collected = ctrl.collected
+        child_stop.set()
+        rx.join(timeout=10.0)
+        proc.join(timeout=5.0)
+        if proc.is_alive():
+            proc.terminate()
+        ctl = result.get("scores")
+        if ctl is None:
+            sc.faults.append("the control process ended without a report (the bridge watchdog stops the arm)")
+        else:
+            sc.faults += ctl.faults
+            sc.collected = ctl.collected
+            sc.err_sq, sc.yaw_sq, sc.max_err_mm = ctl.err_sq, ctl.yaw_sq, ctl.max_err_mm
+            sc.timings_ms.update({k: v for k, v in ctl.timings_ms.items()})
         sc.acquisitions = tracker.acquisitions
     return sc
 
