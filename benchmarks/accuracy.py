@@ -24,7 +24,9 @@ real-coded GA without blob seeding (one island over the whole volume).
 Threshold calibration (printed, and in the JSON): `found` is decided on the detection score
 (the fitness with the two cameras combined by their minimum) of the best candidate, together
 with the outline check (share of outer points on target hue): its limit is suggested midway
-between the worst target and the nearest look-alike above it whose score alone would pass. The scores
+between the worst target (any candidate within 5 % of the truth) and the nearest look-alike above
+it whose score alone would pass (candidates more than 20 % from the truth in target scenes, and
+the look-alike-only scenes). The scores
 of the empty scenes, of the look-alike scenes and of the targets are compared; the suggested
 threshold lies midway between the worst empty scene and the targets' 5th percentile, with the
 false-positive and miss rates it would give. configs/default.toml takes that value.
@@ -203,7 +205,11 @@ def main(argv: list[str] | None = None) -> int:
         scenes.append((sc, model))
         est, cpu = timed(estimate, model, sc.left, sc.right, sc.rig, cfg.ga, cfg.estimator, cfg.fitness, seed=i)
         r = errors(est, sc.truth, cpu)
-        r.update(seed=1000 + i, kind=KINDS[i % 3], distractor=i % 4 == 3)
+        t_true = np.array(sc.truth["position_mm"])
+        r.update(seed=1000 + i, kind=KINDS[i % 3], distractor=i % 4 == 3,
+                 candidates=[{"off_pct": float(100 * np.linalg.norm(np.array(c["position_mm"]) - t_true) / t_true[2]),
+                              "detection_score": c["detection_score"], "outer_on_target": c["outer_on_target"]}
+                             for c in est.candidates])
         rows.append(r)
         print(f"  scene {i:3d} {r['kind']:<5} {'other' if other else 'same ':<5} z {r['distance_mm']:6.0f} "
               f"tilt {r['tilt_true_deg']:4.1f}: {'found' if r['found'] else 'MISSED'} f={r['fitness'] or 0:.3f} "
@@ -279,9 +285,13 @@ def main(argv: list[str] | None = None) -> int:
     # the outline check: share of outer points on target hue, targets against the look-alikes
     # whose score alone would pass
     thr_in_use = cfg.estimator.threshold
-    tgt_o = [r["outer_on_target"] for r in rows if r["success"] and r["outer_on_target"] is not None]
-    look_o = [n["outer_on_target"] for n in nulls if n["look_alike"] and n["outer_on_target"] is not None
-              and score(n["detection_score"]) >= thr_in_use]
+    # targets: candidates within 5 % of the distance from the truth; look-alikes: candidates of
+    # target scenes more than 20 % away, and the best of the look-alike-only scenes
+    cands = [c for r in rows for c in r["candidates"]]
+    tgt_o = [c["outer_on_target"] for c in cands if c["off_pct"] <= SUCCESS_POS_FRAC * 100]
+    look_o = [c["outer_on_target"] for c in cands if c["off_pct"] > 20 and c["detection_score"] >= thr_in_use]
+    look_o += [n["outer_on_target"] for n in nulls if n["look_alike"] and n["outer_on_target"] is not None
+               and score(n["detection_score"]) >= thr_in_use]
     calib["outline"] = {"limit_in_use": cfg.estimator.max_outer_on_target,
                         "targets_max": max(tgt_o) if tgt_o else None,
                         "look_alikes_passing_score": sorted(look_o)}
