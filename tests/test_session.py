@@ -123,9 +123,10 @@ ACCEPTANCE = [  # the issue's scene: drift 30 mm/s, heave +-20 mm / 4 s, roll an
 
 
 def test_acceptance_hold_then_collect_on_the_simulators_clock():
-    # hold_time_s = 5: the descent starts after ~8 s, so 5 s.. is scored while holding
-    cfg = load_config(overrides=ACCEPTANCE + ["servo.hold_time_s=5.0", "servo.collect_speed_mm_s=150.0"])
-    sc = run_lockstep(cfg, 14.0, collect=True, seed=0, settle_s=5.0)
+    # hold_time_s = 7: the hold is reached within ~1.5 s, so the descent starts after ~8.5 s and
+    # 5 s .. 8.5 s is scored while holding; the collection then takes ~5 s
+    cfg = load_config(overrides=ACCEPTANCE + ["servo.hold_time_s=7.0", "servo.collect_speed_mm_s=150.0"])
+    sc = run_lockstep(cfg, 15.0, collect=True, seed=0, settle_s=5.0)
     s = sc.summary()
     assert s["lost_events"] == 0 and s["found_ratio"] == 1.0, s
     assert len(sc.err_sq) > 250 * 2  # at least 2 s of holding scored

@@ -43,7 +43,8 @@ class TrackerParams:
 
     generations_per_frame: int  # most GA generations per camera frame
     time_budget_ms: float  # stop a frame's generations once this much time is spent (ms)
-    window_position_mm: float  # search window: +- this around the predicted position (mm)
+    window_position_mm: float  # search window: +- this around the predicted position (mm)...
+    window_growth_mm_s: float  # ...plus this much per second since the last measurement (mm/s)
     window_heading_deg: float  # ... +- this around the predicted heading (deg)
     window_tilt_deg: float  # ... +- this around the predicted tilt (deg)
     window_alpha_frac: float  # ... alpha within a factor 1 +- this of the track's
@@ -185,7 +186,8 @@ class Tracker:
             return True
         dt = max(t - self.t_last, 1e-3)
         pred = self.p_base + self.v_base * dt
-        return float(np.linalg.norm(p - pred)) <= self.p.max_speed_mm_s * dt + self.p.window_position_mm
+        return float(np.linalg.norm(p - pred)) <= (self.p.max_speed_mm_s + self.p.window_growth_mm_s) * dt \
+            + self.p.window_position_mm
 
     def _correct(self, T_bm: np.ndarray, alpha_m: float, t: float) -> None:
         """Alpha-beta update of position/velocity, orientation taken as measured, alpha smoothed."""
@@ -241,10 +243,12 @@ class Tracker:
 
     # ------------------------------------------------------------------ tracking
 
-    def _window(self, R: np.ndarray, t_left: np.ndarray, alpha: float) -> None:
+    def _window(self, R: np.ndarray, t_left: np.ndarray, alpha: float, dt: float = 0.0) -> None:
+        """Search window around a pose in the left camera frame; the position half-width grows
+        with the time dt (s) since the last measurement, as the prediction's uncertainty does."""
         p = self.p
-        self.search.set_window(R, t_left, alpha, p.window_position_mm, p.window_heading_deg,
-                               p.window_tilt_deg, p.window_alpha_frac)
+        self.search.set_window(R, t_left, alpha, p.window_position_mm + p.window_growth_mm_s * max(dt, 0.0),
+                               p.window_heading_deg, p.window_tilt_deg, p.window_alpha_frac)
 
     def _rebase(self, T_new_old: np.ndarray) -> None:
         """Re-express the population's poses in the new frame's left camera (they live in the
@@ -272,7 +276,7 @@ class Tracker:
         if T_pred is not None:
             T_lm = T_left_base @ T_pred
             if T_lm[2, 3] > 1.0:
-                self._window(T_lm[:3, :3], T_lm[:3, 3], float(self.alpha))
+                self._window(T_lm[:3, :3], T_lm[:3, 3], float(self.alpha), t - self.t_last)
                 s.seed(T_lm[:3, :3], T_lm[:3, 3], np.array([self.alpha]))
         t_end = time.perf_counter() + self.p.time_budget_ms * 1e-3
         n = 0
