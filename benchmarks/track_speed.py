@@ -28,7 +28,7 @@ from photoservo.robot import pa10
 from photoservo.robot.emulator import Emulator
 from photoservo.servo.config import load_config
 from photoservo.servo.recording import Recorder
-from photoservo.servo.session import Frame, Scores, SimCameras, _vision_step, build_sim, run_realtime
+from photoservo.servo.session import Frame, Scores, _vision_step, build_sim, run_sim_realtime
 from photoservo.vision.tracker import Tracker
 
 OUT = Path(__file__).resolve().parent / "out" / "track_speed.json"
@@ -71,12 +71,9 @@ def prerendered(cfg, n_frames: int, record: bool) -> dict:
 def live(cfg, seconds: float, rt_priority: int | None = None) -> dict:
     sim = build_sim(cfg)
     emu = Emulator(cfg.emulator, sim.limits, q0=sim.q0)
-    path = emu.start()
+    emu.start()
     try:
-        t0 = time.monotonic()
-        cams = SimCameras(sim.scene, emu, sim.rig.T_flange_left(), cfg.sim.camera_fps, t0, cfg.sim.lr_skew_s)
-        sc = run_realtime(cfg, seconds, port=path, cameras=cams, model=sim.scene.model, rig=sim.rig,
-                          scene=sim.scene, t0=t0, settle_s=min(5.0, seconds / 2), rt_priority=rt_priority)
+        sc = run_sim_realtime(cfg, seconds, sim, emu, settle_s=min(5.0, seconds / 2), rt_priority=rt_priority)
     finally:
         emu.stop()
     late = np.asarray(sc.timings_ms.get("control_late", [np.nan]))
@@ -95,18 +92,21 @@ def main() -> None:
     ap.add_argument("--frames", type=int, default=90)
     ap.add_argument("--live-s", type=float, default=15.0)
     ap.add_argument("--repeats", type=int, default=3)
+    ap.add_argument("--rt-priority", type=int, default=None, metavar="N",
+                    help="live runs: control process at SCHED_FIFO priority N (as track --rt-priority)")
     a = ap.parse_args()
     cfg = load_config()
     load = os.getloadavg()
     runs_pre = [prerendered(cfg, a.frames, record=False) for _ in range(a.repeats)]
     runs_rec = [prerendered(cfg, a.frames, record=True) for _ in range(a.repeats)]
-    runs_live = [live(cfg, a.live_s) for _ in range(a.repeats)]
+    runs_live = [live(cfg, a.live_s, a.rt_priority) for _ in range(a.repeats)]
 
     def med(runs, key):
         vals = [r[key] for r in runs if key in r]
         return float(np.median(vals)) if vals else float("nan")
 
-    print(f"load average {load[0]:.1f} on {os.cpu_count()} cores; medians of {a.repeats} runs")
+    print(f"load average {load[0]:.1f} on {os.cpu_count()} cores; medians of {a.repeats} runs; "
+          f"live control process priority: {a.rt_priority or 'normal'}")
     print(f"{'stage (median ms per frame)':<34}{'pre-rendered':>14}{'+ recording':>14}{'live sim':>12}")
     for key in ("render", "capture", "hue", "ga", "record", "frame_ms", "frame", "control_ms"):
         print(f"{key:<34}{med(runs_pre, key):>14.2f}{med(runs_rec, key):>14.2f}{med(runs_live, key):>12.2f}")
@@ -118,7 +118,7 @@ def main() -> None:
           f"p99 {med(runs_live, 'control_late_p99_ms'):.2f} ms, max {med(runs_live, 'control_late_max_ms'):.2f} ms; "
           f"watchdog fired in {sum(r['watchdog'] for r in runs_live)} of {len(runs_live)} runs")
     OUT.parent.mkdir(parents=True, exist_ok=True)
-    write_text_atomic(OUT, json.dumps({"load_average": load, "prerendered": runs_pre, "prerendered_recording": runs_rec,
+    write_text_atomic(OUT, json.dumps({"load_average": load, "rt_priority": a.rt_priority, "prerendered": runs_pre, "prerendered_recording": runs_rec,
                                        "live": runs_live}, indent=1, default=float))
     print(f"wrote {OUT}")
 

@@ -149,11 +149,9 @@ def test_distractor_in_view_never_draws_the_arm():
 def test_realtime_session_over_a_real_pty_stops_and_disables_the_arm():
     """The control loop in its own process over the emulator's pty; the session ends with the arm
     at rest and the servo off, and the control process ran at its rate."""
-    import time
-
     from photoservo.robot.emulator import Emulator
     from photoservo.robot.link import Link
-    from photoservo.servo.session import SimCameras, run_realtime
+    from photoservo.servo.session import run_sim_realtime
 
     # the shared test machine can stall a process for a few hundred ms: allow the link 1 s of
     # silence (default 0.25 s) so that the test checks the session's ending, not the machine
@@ -162,10 +160,7 @@ def test_realtime_session_over_a_real_pty_stops_and_disables_the_arm():
     emu = Emulator(cfg.emulator, sim.limits, q0=sim.q0)
     path = emu.start()
     try:
-        t0 = time.monotonic()
-        cams = SimCameras(sim.scene, emu, sim.rig.T_flange_left(), cfg.sim.camera_fps, t0, cfg.sim.lr_skew_s)
-        sc = run_realtime(cfg, 5.0, port=path, cameras=cams, model=sim.scene.model, rig=sim.rig,
-                          scene=sim.scene, t0=t0)
+        sc = run_sim_realtime(cfg, 5.0, sim, emu)
         assert sc.frames >= 2 and not sc.faults, sc.summary()
         assert len(sc.timings_ms["control_late"]) > 250  # the control process ran at its rate
         assert emu.model.accepted > 100  # setpoints reached the bridge and were carried out

@@ -30,7 +30,6 @@ import dataclasses
 import json
 import math
 import sys
-import time
 
 from photoservo import __version__
 from photoservo.errors import InputError
@@ -164,7 +163,7 @@ def _recording_files(rec) -> str:
 
 def _run_sim(args, cfg) -> int:
     from photoservo.robot.emulator import Emulator
-    from photoservo.servo.session import SimCameras, build_sim, run_lockstep, run_realtime
+    from photoservo.servo.session import build_sim, run_lockstep, run_sim_realtime
 
     if args.lockstep:  # the recorded effective config then says how the run was clocked (replay reads it)
         cfg = dataclasses.replace(cfg, sim=dataclasses.replace(cfg.sim, lockstep=True))
@@ -179,15 +178,10 @@ def _run_sim(args, cfg) -> int:
                               recorder=rec, status=status, seed=args.seed, setup=sim)
         else:
             emu = Emulator(cfg.emulator, sim.limits, q0=sim.q0)
-            path = emu.start()
+            emu.start()
             try:
-                t0 = time.monotonic()
-                cams = SimCameras(sim.scene, emu, sim.rig.T_flange_left(), cfg.sim.camera_fps, t0,
-                                  cfg.sim.lr_skew_s)
-                sc = run_realtime(cfg, args.duration, port=path, cameras=cams, model=sim.scene.model,
-                                  rig=sim.rig, collect=args.collect, no_motion=args.no_motion,
-                                  recorder=rec, status=status, seed=args.seed, scene=sim.scene, t0=t0,
-                                  rt_priority=args.rt_priority)
+                sc = run_sim_realtime(cfg, args.duration, sim, emu, collect=args.collect, no_motion=args.no_motion,
+                                      recorder=rec, status=status, seed=args.seed, rt_priority=args.rt_priority)
             finally:
                 emu.stop()
     finally:

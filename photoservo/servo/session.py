@@ -659,6 +659,16 @@ def run_realtime(cfg: Config, duration_s: float, *, port: str, cameras, model, r
     return sc
 
 
+def run_sim_realtime(cfg: Config, duration_s: float, sim: SimSetup, emulator, **kwargs) -> Scores:
+    """`run_realtime` on the simulator: cameras rendering the scene from where `emulator` (a
+    started `robot.emulator.Emulator`) has the arm, the control process on its pty, hold scored
+    against the truth. kwargs go to `run_realtime`."""
+    t0 = time.monotonic()
+    cams = SimCameras(sim.scene, emulator, sim.rig.T_flange_left(), cfg.sim.camera_fps, t0, cfg.sim.lr_skew_s)
+    return run_realtime(cfg, duration_s, port=emulator.path, cameras=cams, model=sim.scene.model, rig=sim.rig,
+                        scene=sim.scene, t0=t0, **kwargs)
+
+
 def _shift_time(track: Track, t0: float) -> Track:
     """The tracker ran on session time (s since t0); the control thread reads monotonic time."""
     return dataclasses.replace(track, t=track.t + t0)
