@@ -169,3 +169,39 @@ def test_realtime_session_over_a_real_pty_stops_and_disables_the_arm():
         assert not st.servo_on and not st.moving  # controlled stop, then servo off
     finally:
         emu.stop()
+
+
+def test_ctrl_c_stops_the_arm_and_leaves_a_verified_recording(tmp_path):
+    """SIGINT to a running `photoservo track --sim` (real time, control process on the emulator's
+    pty): exit 130, one line on stderr and no traceback, a recording that `rerun rrd verify`
+    accepts and whose event log shows the session ran."""
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    from photoservo.servo.recording import verify_rrd
+    from photoservo.servo.replay_io import read_recording
+
+    rec = tmp_path / "ctrl_c.rrd"
+    proc = subprocess.Popen([sys.executable, "-m", "photoservo.servo.cli", "track", "--sim", "--duration", "60",
+                             "--record", str(rec), "--set", "recording.segment_s=0.0", "--set", "sim.camera_fps=10.0"],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        deadline = time.monotonic() + 90
+        seen = ""
+        while "tracking" not in seen:  # the status line (a line per second without a terminal)
+            line = proc.stderr.readline()
+            assert line and time.monotonic() < deadline, f"track ended or stalled: {seen[-500:]}"
+            seen += line
+        proc.send_signal(signal.SIGINT)
+        out, err = proc.communicate(timeout=60)
+    finally:
+        proc.kill()
+        proc.wait()
+    assert proc.returncode == 130, err
+    assert "Traceback" not in err and "interrupted" in err
+    ok, msg = verify_rrd(rec)
+    assert ok, msg
+    r = read_recording(rec)
+    assert len(r.frames) >= 1 and any("track tracking" in text for _, _, text in r.events)

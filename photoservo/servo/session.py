@@ -492,8 +492,13 @@ def control_process(job: ControlJob, conn, stop) -> None:
     `Controller` at the control rate, takes tracks from `conn`, sends back each tick's joint state
     and decision, and ends — on `stop`, a fault or an exception — with a controlled stop and the
     servo off. Its last message is ("done", Scores, collected)."""
+    import signal
+
     from photoservo.robot.link import Link
 
+    # Ctrl-C reaches the whole process group: the vision process handles it and sets `stop`, so
+    # this loop ends in order (controlled stop, servo off) instead of dying mid-period
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
     cfg = job.cfg
     sc = Scores()
     ctrl = Controller(cfg.servo, Motion(cfg.motion, pa10.load_limits()), job.T_flange_left, job.centre,

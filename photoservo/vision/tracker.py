@@ -214,7 +214,7 @@ class Tracker:
         seed = int(self.ss.spawn(1)[0].generate_state(1)[0])
         est = estimate(self.model, left_bgr, right_bgr, self.rig, self.ga_params, self.est_params,
                        self.fit_params, seed=seed, frame=frame)
-        cands = [c for c in est.candidates if c["fitness"] is not None and c["fitness"] >= self.est_params.threshold]
+        cands = [c for c in est.candidates if c["found"]]  # passed the estimator's detection tests
         if not cands:
             best = est.candidates[0] if est.candidates else None
             if best is None:
