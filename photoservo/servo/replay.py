@@ -87,18 +87,24 @@ class ReplaySetup:
         return f"fixed {n} generations per tracking frame (no time budget)"
 
 
-def read_checked(path: str | Path) -> Recording:
-    """`read_recording` with one-line errors: a missing, unreadable or non-photoservo file is an
-    InputError; a preview-mode (lossy JPEG) recording cannot be replayed."""
-    p = Path(path)
+def _read(p: Path) -> tuple[Recording, list]:
+    """`read_recording` with a one-line InputError for a missing or unreadable file; also the
+    warnings it raised (a cut-short file says why)."""
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         try:
-            rec = read_recording(p)
+            return read_recording(p), list(caught)
         except InputError:
             raise
         except (OSError, ValueError, RuntimeError) as e:
             raise InputError(f"{p}: not a readable recording ({_first_line(e)})") from None
+
+
+def read_checked(path: str | Path) -> Recording:
+    """`read_recording` with one-line errors: a missing, unreadable or non-photoservo file is an
+    InputError; a preview-mode (lossy JPEG) recording cannot be replayed."""
+    p = Path(path)
+    rec, caught = _read(p)
     if rec.incomplete and not rec.frames:
         why = _first_line(caught[0].message) if caught else "cut short"
         raise InputError(f"{p}: not a readable recording ({why})")
@@ -350,14 +356,7 @@ def world_from(path: str | Path, config_path: str | Path | None = None, override
     """Rebuild the simulated world of a recording: its effective config (the [sim] section:
     seed, target motion, camera timing) with --config/--set on top, and its tracker seed."""
     p = Path(path)
-    with warnings.catch_warnings(record=True):
-        warnings.simplefilter("always")
-        try:
-            rec = read_recording(p)
-        except InputError:
-            raise
-        except (OSError, ValueError, RuntimeError) as e:
-            raise InputError(f"{p}: not a readable recording ({_first_line(e)})") from None
+    rec, _ = _read(p)
     if not rec.truth:
         raise InputError(f"{p}: not a simulated recording (no ground truth): --world-from needs one")
     rec_cfg, cfg = recorded_config(rec, p, config_path, overrides)
