@@ -80,7 +80,6 @@ class Controller:
     T_flange_left: np.ndarray
     T_left_centre: np.ndarray
     collect: bool = False
-    no_motion: bool = False
     phase: Phase = "servo"
     height_mm: float = field(default=0.0)
     t_hold_start: float | None = None
@@ -268,8 +267,7 @@ def run_lockstep(cfg: Config, duration_s: float, *, collect: bool = False, no_mo
     arm = LockstepArm(cfg.emulator, sim.limits, sim.q0)
     if not no_motion:
         arm.enable()
-    ctrl = Controller(cfg.servo, Motion(cfg.motion, sim.limits), T_fl, centre, collect=collect,
-                      no_motion=no_motion)
+    ctrl = Controller(cfg.servo, Motion(cfg.motion, sim.limits), T_fl, centre, collect=collect)
     tracker = Tracker(scene.model, rig, cfg.tracker, cfg.ga, cfg.estimator, cfg.fitness, seed)
     tracker.use_time_budget = False  # generations, not wall time, decide: deterministic
     sc = Scores()
@@ -300,7 +298,7 @@ def run_lockstep(cfg: Config, duration_s: float, *, collect: bool = False, no_mo
             if track.status != prev_status:
                 if track.status == "lost":
                     sc.lost_events += 1
-                _emit(recorder, ctrl, fr.t_delivery, f"track {track.status}")
+                ctrl.events.append((fr.t_delivery, f"track {track.status}"))
                 prev_status = track.status
         st = arm.state()
         c0 = time.perf_counter()
@@ -328,10 +326,6 @@ def run_lockstep(cfg: Config, duration_s: float, *, collect: bool = False, no_mo
     sc.acquisitions = tracker.acquisitions
     sc.faults += [f"bridge refused setpoint: {P.Error(n.error).name}" for n in arm.nacks]
     return sc
-
-
-def _emit(recorder, ctrl: Controller, t: float, text: str) -> None:
-    ctrl.events.append((t, text))
 
 
 def _vision_step(fr: Frame, tracker: Tracker, cfg: Config, sc: Scores, recorder, scene: SimScene | None) -> Track:
@@ -502,7 +496,7 @@ def control_process(job: ControlJob, conn, stop) -> None:
     cfg = job.cfg
     sc = Scores()
     ctrl = Controller(cfg.servo, Motion(cfg.motion, pa10.load_limits()), job.T_flange_left, job.centre,
-                      collect=job.collect, no_motion=job.no_motion)
+                      collect=job.collect)
     n_events = 0
     try:
         if job.rt_priority is not None:
