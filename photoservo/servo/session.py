@@ -395,28 +395,90 @@ def _status_dict(now: float, sc: Scores, track: Track | None, info: ControlInfo)
 # ----------------------------------------------------------------------------- real time
 
 
+def _render_process(cfg: Config, requests, frames) -> None:
+    """The simulated cameras' renderer in its own process (its own core): builds the same scene
+    as the session (`build_sim`, deterministic from the config) and renders each request
+    (t_left, t_right, T_base_left, T_base_left_at_right) into a stereo pair."""
+    import signal
+
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # the session stops it
+    scene = build_sim(cfg).scene
+    frames.send(("ready",))
+    while True:
+        msg = requests.recv()
+        if msg is None:
+            return
+        frames.send(scene.render(*msg))
+
+
 class SimCameras:
-    """The simulator's stereo cameras in real time: each call exposes a pair NOW on the monotonic
-    clock, rendered from where the emulated arm truly is (its bridge's joint state), paced at the
-    camera rate. The loop learns where the cameras were from the link, as on hardware."""
+    """The simulator's stereo cameras in real time, like a camera with its own electronics: a
+    shutter thread exposes a pair at the camera rate — the time is the monotonic clock then, the
+    pose where the emulated arm truly is (its bridge's joint state) — and a renderer process
+    delivers the images while the loop is busy with the previous pair. One exposure is in flight
+    at a time; the loop learns where the cameras were from the arm's states, as on hardware."""
 
-    def __init__(self, scene: SimScene, emulator, T_flange_left: np.ndarray, fps: float, t0: float,
-                 skew_s: float) -> None:
-        self.scene, self.emulator, self.T_fl = scene, emulator, T_flange_left
-        self.period, self.t0, self.skew = 1.0 / fps, t0, skew_s
-        self.t_next = t0
+    def __init__(self, cfg: Config, emulator, T_flange_left: np.ndarray) -> None:
+        self.emulator, self.T_fl, self.t0 = emulator, T_flange_left, 0.0
+        self.period, self.skew = 1.0 / cfg.sim.camera_fps, cfg.sim.lr_skew_s
+        ctx = multiprocessing.get_context("spawn")
+        self._req_rx, self._req_tx = ctx.Pipe(duplex=False)
+        self._frm_rx, self._frm_tx = ctx.Pipe(duplex=False)
+        self._proc = ctx.Process(target=_render_process, args=(cfg, self._req_rx, self._frm_tx),
+                                 name="photoservo-cameras", daemon=True)
+        self._proc.start()
+        if not self._frm_rx.poll(60.0):
+            raise RuntimeError("the simulated cameras' renderer did not start within 60 s")
+        self._frm_rx.recv()
+        self._cond = threading.Condition()
+        self._in_flight: deque[tuple[int, float]] = deque()
+        self._stop = False
         self.index = 0
+        self._shutter = threading.Thread(target=self._expose, name="sim-shutter", daemon=True)
 
-    def read(self) -> tuple[int, np.ndarray, np.ndarray, float, float]:
-        now = time.monotonic()
-        if now < self.t_next:
-            time.sleep(self.t_next - now)
-        self.t_next = max(self.t_next + self.period, time.monotonic() - self.period)
-        t_l = time.monotonic()
-        T_l = pa10.fk(self.emulator.true_state().q) @ self.T_fl
-        left, right = self.scene.render(T_l, t_l - self.t0, T_l, t_l + self.skew - self.t0)
-        self.index += 1
-        return self.index - 1, left, right, t_l, t_l + self.skew
+    def start(self, t0: float) -> None:
+        """Start exposing; scene time is monotonic time minus t0."""
+        self.t0 = t0
+        self._shutter.start()
+
+    def _expose(self) -> None:
+        t_next = time.monotonic()
+        while True:
+            with self._cond:
+                while not self._stop and (self._in_flight or time.monotonic() < t_next):
+                    self._cond.wait(max(0.0, min(0.05, t_next - time.monotonic())) or 0.05)
+                if self._stop:
+                    return
+                t_l = time.monotonic()
+                T_l = pa10.fk(self.emulator.true_state().q) @ self.T_fl
+                self._in_flight.append((self.index, t_l))
+                self.index += 1
+            self._req_tx.send((T_l, t_l - self.t0, T_l, t_l + self.skew - self.t0))
+            t_next = max(t_next + self.period, time.monotonic() - self.period)
+
+    def read(self, timeout_s: float = 1.0) -> tuple[int, np.ndarray, np.ndarray, float, float] | None:
+        """The next pair (index, left, right, t_left, t_right), or None after timeout_s."""
+        if not self._frm_rx.poll(timeout_s):
+            return None
+        left, right = self._frm_rx.recv()
+        with self._cond:
+            k, t_l = self._in_flight.popleft()
+            self._cond.notify_all()
+        return k, left, right, t_l, t_l + self.skew
+
+    def close(self) -> None:
+        with self._cond:
+            self._stop = True
+            self._cond.notify_all()
+        if self._shutter.is_alive():
+            self._shutter.join(timeout=2.0)
+        try:
+            self._req_tx.send(None)
+        except (OSError, ValueError):
+            pass
+        self._proc.join(timeout=5.0)
+        if self._proc.is_alive():
+            self._proc.terminate()
 
 
 class ReaderCameras:
@@ -662,10 +724,14 @@ def run_sim_realtime(cfg: Config, duration_s: float, sim: SimSetup, emulator, **
     """`run_realtime` on the simulator: cameras rendering the scene from where `emulator` (a
     started `robot.emulator.Emulator`) has the arm, the control process on its pty, hold scored
     against the truth. kwargs go to `run_realtime`."""
+    cams = SimCameras(cfg, emulator, sim.rig.T_flange_left())
     t0 = time.monotonic()
-    cams = SimCameras(sim.scene, emulator, sim.rig.T_flange_left(), cfg.sim.camera_fps, t0, cfg.sim.lr_skew_s)
-    return run_realtime(cfg, duration_s, port=emulator.path, cameras=cams, model=sim.scene.model, rig=sim.rig,
-                        scene=sim.scene, t0=t0, **kwargs)
+    cams.start(t0)
+    try:
+        return run_realtime(cfg, duration_s, port=emulator.path, cameras=cams, model=sim.scene.model,
+                            rig=sim.rig, scene=sim.scene, t0=t0, **kwargs)
+    finally:
+        cams.close()
 
 
 def _shift_time(track: Track, t0: float) -> Track:
