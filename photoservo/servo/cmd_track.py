@@ -79,7 +79,8 @@ class _StatusLine:
         pos_s = "-" if pos is None else "(" + ", ".join(f"{x:.0f}" for x in pos) + ") mm"
         fit = d.get("fitness")
         err = d.get("error_mm")
-        line = (f"t {d['t']:5.1f} s | {d.get('fps', float('nan')):4.1f} fps | {d['status']:<9} "
+        rate = f"{d['fps']:4.1f} fps" if "fps" in d else "lockstep"  # simulated clock: no wall rate
+        line = (f"t {d['t']:5.1f} s | {rate} | {d['status']:<9} "
                 f"fit {(fit if fit is not None and math.isfinite(fit) else float('nan')):.2f} | "
                 f"pos {pos_s} | alpha {d['alpha'] or float('nan'):.2f} | "
                 f"err {err:.0f} mm {d['yaw_deg']:.1f} deg | {d['phase']}"
