@@ -18,6 +18,7 @@ import cv2
 import numpy as np
 
 from photoservo.errors import InputError
+from photoservo.vision.pose import make_pose as make_T  # one builder for the whole of vision/
 from photoservo.vision.board import (
     Board,
     BoardDetection,
@@ -45,14 +46,6 @@ HAND_EYE_METHODS = {
 
 
 # ----------------------------------------------------------------------------- small pose helpers
-
-
-def make_T(R: np.ndarray, t: np.ndarray) -> np.ndarray:
-    """4x4 homogeneous transform from R (3x3) and t (3,)."""
-    T = np.eye(4)
-    T[:3, :3] = R
-    T[:3, 3] = np.asarray(t, dtype=np.float64).ravel()
-    return T
 
 
 def inv_T(T: np.ndarray) -> np.ndarray:

@@ -87,3 +87,11 @@ def heading_tilt_error(R_true: np.ndarray, R_est: np.ndarray) -> tuple[float, fl
     E = R_true.T @ R_est
     psi, _, _ = heading_tilt_from_rotation(E)
     return float(np.degrees(abs(psi))), float(np.degrees(tilt))
+
+
+def make_pose(R: np.ndarray, t: np.ndarray) -> np.ndarray:
+    """4x4 homogeneous transform T with X_a = R · X_b + t, i.e. T_a_b from R (3x3) and t (3,)."""
+    T = np.eye(4)
+    T[:3, :3] = R
+    T[:3, 3] = np.asarray(t, dtype=np.float64).ravel()
+    return T

@@ -41,6 +41,7 @@ import cv2
 import numpy as np
 
 from photoservo.errors import InputError
+from photoservo.vision.pose import make_pose as make_transform  # one builder for vision/
 from photoservo.vision.photo_model import PhotoModel, hue_distance
 from photoservo.vision.rig import Camera, Rig
 
@@ -116,14 +117,6 @@ class CameraEffects:
     white_balance: tuple[float, float, float] = (1.0, 1.0, 1.0)
     noise_sigma: float = 0.0
     jpeg_quality: int = 0
-
-
-def make_transform(R: np.ndarray, t: np.ndarray) -> np.ndarray:
-    """4x4 homogeneous transform from rotation R (3x3) and translation t (3,)."""
-    T = np.eye(4)
-    T[:3, :3] = R
-    T[:3, 3] = t
-    return T
 
 
 def rot_z(angle: float) -> np.ndarray:

@@ -32,6 +32,7 @@ from photoservo.vision.estimator import EstimatorParams, PoseSearch, estimate
 from photoservo.vision.fitness import FitnessParams, StereoHue
 from photoservo.vision.ga import GAParams
 from photoservo.vision.photo_model import PhotoModel
+from photoservo.vision.pose import make_pose
 from photoservo.vision.rig import Rig
 
 Status = Literal["acquiring", "tracking", "coasting", "lost"]
@@ -153,7 +154,7 @@ class Tracker:
         if cand is not None:
             R_l, t_l, alpha_m, f, _ = cand
             if f >= self.est_params.threshold:
-                T_bm = T_base_left @ _pose(R_l, t_l)
+                T_bm = T_base_left @ make_pose(R_l, t_l)
                 if self._plausible(T_bm[:3, 3], t):
                     measured = (R_l, t_l, alpha_m, f, T_bm)
         fitness = float(cand[3]) if cand is not None else float("-inf")
@@ -318,10 +319,3 @@ def on_plane(g: np.ndarray, K: np.ndarray, T_left_base: np.ndarray, water_z_mm: 
     norm = math.hypot(ax, ay)
     g[:, 4], g[:, 5] = (ax / norm * th, ay / norm * th) if norm > 1e-12 else (0.0, 0.0)
     return g
-
-
-def _pose(R: np.ndarray, t: np.ndarray) -> np.ndarray:
-    T = np.eye(4)
-    T[:3, :3] = R
-    T[:3, 3] = t
-    return T
