@@ -1,6 +1,6 @@
 """Accuracy of `estimate` from the DEFAULT search volume (issue 2 item 9, "accuracy").
 
-Scenes (vision/synthetic.random_scene, seeded): squid / crab / fish in turn at 300-1500 mm depth,
+Scenes (sim/renderer.random_scene, seeded): squid / crab / fish in turn at 300-1500 mm depth,
 random heading, tilt up to 40 deg, every effect on (waves, glints, sensor noise, blur, brightness,
 per-camera white balance, JPEG/MJPG chroma loss, bending, foam occlusion) and the written rig off
 from the rendering rig by a calibration error (0.1 deg stereo rotation, 0.5 % focal length).
@@ -10,7 +10,7 @@ adds a look-alike elsewhere in view. Null scenes: empty water, and empty water w
 
 Per target scene: position error (mm, % of distance), depth error (% of distance), heading error
 and tilt error (deg, separately: a swing-twist split about the model normal,
-vision/pose.heading_tilt_error), size error (%, |alpha_true / alpha_est - 1|: both sides of the
+geometry.heading_tilt_error), size error (%, |alpha_true / alpha_est - 1|: both sides of the
 box scale alike), generations, evaluations, wall seconds. Success: found and position error
 <= 5 % of the distance. "Converged <= 1 s": success, stopped by the convergence test (not the
 generation cap) and wall time <= 1 s. Null scenes: false-positive rate (found = true).
@@ -33,7 +33,7 @@ false-positive and miss rates it would give. configs/default.toml takes that val
 
 The machine has 2 cores shared with other jobs: wall times are medians on a loaded machine.
 Prints tables and writes benchmarks/out/accuracy.json.
-Run: /work/venv/bin/python benchmarks/accuracy.py [--quick] [--scenes 60] [--nulls 50]
+Run: python benchmarks/accuracy.py [--quick] [--scenes 60] [--nulls 50]
 """
 
 from __future__ import annotations
@@ -50,13 +50,13 @@ from pathlib import Path
 import numpy as np
 
 from photoservo.fileio import write_text_atomic
-from photoservo.servo.config import load_config
+from photoservo.config import load_config
 from photoservo.vision.estimator import GeneSpace, PoseSearch, estimate
 from photoservo.vision.fitness import stereo_hue
 from photoservo.vision.ga import paper_params
 from photoservo.vision.photo_model import build_photo_model
-from photoservo.vision.pose import heading_tilt_error
-from photoservo.vision.synthetic import EFFECTS, random_scene
+from photoservo.geometry import heading_tilt_error
+from photoservo.sim.renderer import EFFECTS, random_scene
 
 KINDS = ("squid", "crab", "fish")
 SUCCESS_POS_FRAC = 0.05

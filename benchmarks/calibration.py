@@ -2,7 +2,7 @@
 height (the scene of tests/calib_scene.py: 480x360 px cameras, f ~ 520 px, mild barrel
 distortion, 100 mm baseline, boards 450-650 mm away).
 
-    /work/venv/bin/python benchmarks/calibration.py [--repeats 3]
+    python benchmarks/calibration.py [--repeats 3]
 
 Prints a table and writes benchmarks/out/calibration.json. Each row is the median over
 `--repeats` seeds (board poses and pixel noise change with the seed).

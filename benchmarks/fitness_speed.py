@@ -3,7 +3,7 @@ whole population, with a photo-model of exactly 1000 sampling points (fixed, so 
 sampling cannot buy speed), at 30 individuals (the paper's population) and 100, beside the
 paper's 0.213 s per generation.
 
-Scene: a seeded synthetic squid scene (vision/synthetic.random_scene) at 600 mm, its photo-model
+Scene: a seeded synthetic squid scene (sim/renderer.random_scene) at 600 mm, its photo-model
 resampled to exactly 1000 points (inner and outer in their natural proportion). Population:
 the truth with Gaussian spread (40 mm, ~15 deg, x1.3 in alpha), like a GA mid-run.
 Two rigs: the synthetic rig as written (lens distortion: the kernel's general path) and the
@@ -22,7 +22,7 @@ The machine has 2 cores shared with other jobs: the load average is printed and 
 times on a loaded machine are pessimistic, the CPU column is the steadier one.
 
 Prints a table and writes benchmarks/out/fitness_speed.json.
-Run: /work/venv/bin/python benchmarks/fitness_speed.py [--repeats 300]
+Run: python benchmarks/fitness_speed.py [--repeats 300]
 """
 
 from __future__ import annotations
@@ -41,7 +41,7 @@ import cv2
 import numpy as np
 
 from photoservo.fileio import write_text_atomic
-from photoservo.servo.config import load_config
+from photoservo.config import load_config
 from photoservo.vision.fitness import (
     FitnessParams,
     fitness,
@@ -50,7 +50,7 @@ from photoservo.vision.fitness import (
 )
 from photoservo.vision.photo_model import PhotoModel, build_photo_model
 from photoservo.vision.rig import Camera, Rig
-from photoservo.vision.synthetic import random_scene
+from photoservo.sim.renderer import random_scene
 
 PAPER_S = 0.213  # the paper's seconds per generation (30 individuals, 68-bit GA)
 N_POINTS = 1000
@@ -100,10 +100,10 @@ import time, numpy as np
 t0 = time.perf_counter()
 from photoservo.vision import fitness_kernel  # numba import + cache lookup
 t1 = time.perf_counter()
-from photoservo.servo.config import load_config
+from photoservo.config import load_config
 from photoservo.vision.fitness import fitness, StereoHue
 from photoservo.vision.photo_model import PhotoModel
-from photoservo.vision.synthetic import synthetic_rig
+from photoservo.sim.renderer import synthetic_rig
 p = load_config().fitness
 m = PhotoModel(inner_uv=np.zeros((3, 2)), inner_hue=np.zeros(3, np.uint8), outer_uv=np.ones((3, 2)),
                target_hues=np.zeros(180, bool), size_px=(1.0, 1.0), origin_px=(0.0, 0.0),

@@ -1,6 +1,6 @@
 """PA-10 kinematics and Ruckig motion: time per call and IK success rate.
 
-    /work/venv/bin/python benchmarks/kinematics_motion.py [--repeats 5] [--poses 200]
+    python benchmarks/kinematics_motion.py [--repeats 5] [--poses 200]
 
 Prints a table and writes benchmarks/out/kinematics_motion.json. Times are the median over
 `--repeats` runs (per-step p99 over all steps as well). IK poses are fk of joint vectors drawn

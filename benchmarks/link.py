@@ -1,7 +1,7 @@
 """Serial link to the PA-10 bridge: throughput, latency, control-loop jitter, fault safety
 (issue 3 item 8).
 
-    /work/venv/bin/python benchmarks/link.py [--seconds 8] [--repeats 3] [--quick]
+    python benchmarks/link.py [--seconds 8] [--repeats 3] [--quick]
 
 The bridge is the controller emulator as a separate process (`photoservo pa10-sim`, like the
 real bridge on its own hardware), on a real pty, pacing bytes at the given baud rate.
@@ -17,7 +17,7 @@ real bridge on its own hardware), on a real pty, pacing bytes at the given baud 
    Motion.move_step (Ruckig + safety layer) -> send_setpoint), shipped watchdog (3 periods):
    alone; next to a numpy/OpenCV thread (blur, HSV, matmul on 640x480 stereo); next to the real
    GA (`vision.estimator.estimate` on examples/scene, in a loop); next to a thread logging
-   640x480 stereo frames at 30 fps to Rerun (`servo.recording.Recorder`, lossless); and with
+   640x480 stereo frames at 30 fps to Rerun (`record.recorder.Recorder`, lossless); and with
    the GA + Rerun load in the main process but control + link in their OWN process
    (multiprocessing). Period error = |actual period - 4 ms|: p50, p99, max; watchdog firings
    (rising edges of the WATCHDOG status bit) and refused setpoints.
@@ -75,7 +75,7 @@ class Bridge:
         # emulator must not be what starves on this shared machine
         # (below the control process's 40: here both share 2 busy cores, which they would not)
         rt = ["--rt-priority", "30"] if _rt_permitted() else []
-        self.p = subprocess.Popen([sys.executable, "-m", "photoservo.servo.cli", "pa10-sim", *rt, *flags],
+        self.p = subprocess.Popen([sys.executable, "-m", "photoservo.cli", "pa10-sim", *rt, *flags],
                                   stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
         self.path = self.p.stdout.readline().strip()
         if not self.path.startswith("/dev/"):
@@ -194,7 +194,7 @@ def link_numbers(baud: int, seconds: float) -> dict:
 
 def control_loop(path: str, seconds: float) -> dict:
     """The 250 Hz loop: state -> Motion.move_step -> setpoint; alternating between two targets."""
-    from photoservo.servo.config import load_config
+    from photoservo.config import load_config
     from photoservo.servo.motion import Motion
 
     cfg = load_config()
@@ -297,7 +297,7 @@ def load_numpy_opencv(stop: threading.Event) -> None:
 def load_ga(stop: threading.Event) -> None:
     """The real GA: the estimator on the bundled example scene, over and over."""
     from photoservo.fileio import read_image
-    from photoservo.servo.config import load_config
+    from photoservo.config import load_config
     from photoservo.vision.estimator import estimate
     from photoservo.vision.photo_model import load_photo_model
     from photoservo.vision.rig import load_rig
@@ -315,8 +315,8 @@ def load_ga(stop: threading.Event) -> None:
 
 def load_rerun(stop: threading.Event) -> None:
     """A thread logging 640x480 stereo frames to Rerun at 30 fps (lossless, as `track` does)."""
-    from photoservo.servo.config import load_config
-    from photoservo.servo.recording import Recorder
+    from photoservo.config import load_config
+    from photoservo.record.recorder import Recorder
 
     cfg = load_config()
     rng = np.random.default_rng(1)

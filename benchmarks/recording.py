@@ -1,6 +1,6 @@
 """Recording cost per encoding (issue 6 item 7): 640x480 stereo at 30 fps.
 
-For each frame encoding of `servo.recording` (lossless = raw pixels + rerun's LZ4, png,
+For each frame encoding of `record.recorder` (lossless = raw pixels + rerun's LZ4, png,
 preview JPEG) and two kinds of
 frames (the synthetic renderer's water scene as rendered, and the same with 2.5 DN sensor noise
 like a real camera), it records N stereo frames through `Recorder` and reports:
@@ -14,13 +14,13 @@ like a real camera), it records N stereo frames through `Recorder` and reports:
                    writing included) per frame: the honest cost on a loaded machine
   encode ms/frame  time spent encoding one stereo frame (both images)
   MB/min           file size per minute of 30 fps stereo
-  read fps         `replay_io.iter_frames` read-back speed (stereo frames/s, decoded)
+  read fps         `reader.iter_frames` read-back speed (stereo frames/s, decoded)
   exact            frames read back bit-equal to those logged
 and the per-frame cost of the other logs of a tracking frame (estimate with projected points,
 timings, 17 arm samples of a 500 Hz control loop), and the stall at a segment change.
 
 Prints a table and writes benchmarks/out/recording.json (median of `--repeats` runs).
-Run: /work/venv/bin/python benchmarks/recording.py [--frames 150] [--repeats 3]
+Run: python benchmarks/recording.py [--frames 150] [--repeats 3]
 """
 
 from __future__ import annotations
@@ -36,12 +36,12 @@ from pathlib import Path
 import numpy as np
 
 from photoservo.fileio import write_text_atomic
-from photoservo.servo.config import load_config
-from photoservo.servo.recording import MODES, Recorder
-from photoservo.servo.replay_io import iter_frames
+from photoservo.config import load_config
+from photoservo.record.recorder import MODES, Recorder
+from photoservo.record.reader import iter_frames
 from photoservo.vision.photo_model import build_photo_model
-from photoservo.vision.specimens import specimen
-from photoservo.vision.synthetic import (
+from photoservo.sim.specimens import specimen
+from photoservo.sim.renderer import (
     CameraEffects,
     Scene,
     calm_water,

@@ -15,7 +15,7 @@ The machine has 2 cores shared with other jobs: the load average is stored; wall
 pessimistic, the CPU column is the steadier one; the ratio is what carries over.
 
 Prints a table and writes benchmarks/out/render_speed.json.
-Run: /work/venv/bin/python benchmarks/render_speed.py [--frames 15] [--strides 2,4,8]
+Run: python benchmarks/render_speed.py [--frames 15] [--strides 2,4,8]
 """
 
 from __future__ import annotations
@@ -30,10 +30,10 @@ import cv2
 import numpy as np
 
 from photoservo.fileio import write_text_atomic
-from photoservo.servo.config import load_config
-from photoservo.servo.world import SIM_WATER_STRIDE, SimScene
+from photoservo.config import load_config
+from photoservo.sim.world import SIM_WATER_STRIDE, SimScene
 from photoservo.vision.photo_model import NO_HUE, hue_image
-from photoservo.vision.synthetic import CameraEffects, make_transform, synthetic_rig
+from photoservo.sim.renderer import CameraEffects, make_transform, synthetic_rig
 
 OUT = Path(__file__).parent / "out" / "render_speed.json"
 

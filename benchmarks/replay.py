@@ -14,7 +14,7 @@ lossless) and replays it `--repeats` times per config change, reporting (median 
   identical      the replay's estimates equal the recorded run's (same config only)
 
 Prints a table and writes benchmarks/out/replay.json.
-Run: /work/venv/bin/python benchmarks/replay.py [--duration 2] [--fps 15] [--repeats 3]
+Run: python benchmarks/replay.py [--duration 2] [--fps 15] [--repeats 3]
 The machine is shared by several engineers: times are indicative, not a clean measurement.
 """
 
@@ -28,9 +28,9 @@ import time
 from pathlib import Path
 
 from photoservo.fileio import write_text_atomic
-from photoservo.servo.cli import main as cli
-from photoservo.servo.replay import load_replay, replay
-from photoservo.servo.replay_io import read_recording
+from photoservo.cli.main import main as cli
+from photoservo.record.replay import load_replay, replay
+from photoservo.record.reader import read_recording
 
 CHANGES: dict[str, list[str]] = {
     "same config": [],

@@ -7,11 +7,11 @@ seeded synthetic scenes are estimated from the default search volume and we repo
   fit ms/gen      one fitness call, 30 individuals (median of repeated calls, first scene's model)
   success         found and position error <= 5 % of the distance
   pos %, depth %  median position / depth error in % of the distance (successful or not)
-  heading, tilt   median errors (deg), separately (vision/pose.heading_tilt_error)
+  heading, tilt   median errors (deg), separately (geometry.heading_tilt_error)
   size %          median |alpha_true / alpha_est - 1|
   wall s          median wall seconds of `estimate` (loaded shared machine)
 
-Scenes: vision/synthetic.random_scene, squid / crab / fish in turn, 300-1500 mm, random heading
+Scenes: sim/renderer.random_scene, squid / crab / fish in turn, 300-1500 mm, random heading
 and tilt up to 40 deg, effects waves, glints, noise, blur, white balance, chroma loss and bend;
 odd scenes give the estimator another individual's photo. Every interval sees the same scenes,
 so accuracy is compared in pairs against the finest interval: per scene, this interval's error
@@ -22,7 +22,7 @@ interval changes; the estimate's wall time on this shared machine is dominated b
 and load noise). The table marks it.
 
 Prints a table and writes benchmarks/out/sampling_sweep.json.
-Run: /work/venv/bin/python benchmarks/sampling_sweep.py [--scenes 18] [--intervals 2,3,4,6,8,12]
+Run: python benchmarks/sampling_sweep.py [--scenes 18] [--intervals 2,3,4,6,8,12]
 """
 
 from __future__ import annotations
@@ -37,12 +37,12 @@ from pathlib import Path
 import numpy as np
 
 from photoservo.fileio import write_text_atomic
-from photoservo.servo.config import load_config
+from photoservo.config import load_config
 from photoservo.vision.estimator import estimate
 from photoservo.vision.fitness import fitness, stereo_hue
 from photoservo.vision.photo_model import build_photo_model
-from photoservo.vision.pose import heading_tilt_error
-from photoservo.vision.synthetic import random_scene
+from photoservo.geometry import heading_tilt_error
+from photoservo.sim.renderer import random_scene
 
 KINDS = ("squid", "crab", "fish")
 EFFECTS = ("waves", "glints", "noise", "blur", "white-balance", "chroma", "bend")

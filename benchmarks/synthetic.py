@@ -18,7 +18,7 @@ The machine has 2 cores shared with other jobs: the load average is stored; wall
 pessimistic, the CPU column is the steadier one. Medians of repeated runs.
 
 Prints a table and writes benchmarks/out/synthetic.json.
-Run: /work/venv/bin/python benchmarks/synthetic.py [--repeats 5]
+Run: python benchmarks/synthetic.py [--repeats 5]
 """
 
 from __future__ import annotations
@@ -33,11 +33,11 @@ import cv2
 import numpy as np
 
 from photoservo.fileio import write_text_atomic
-from photoservo.servo.config import load_config
+from photoservo.config import load_config
 from photoservo.vision.photo_model import build_photo_model
 from photoservo.vision.rig import project_points
-from photoservo.vision.specimens import SPECIES, specimen
-from photoservo.vision.synthetic import (
+from photoservo.sim.specimens import SPECIES, specimen
+from photoservo.sim.renderer import (
     DEFAULT_EFFECTS,
     EFFECTS,
     StereoRenderer,

@@ -9,7 +9,7 @@ p99 within 2 ms. The machine is shared: the load average is printed and stored; 
 repeated runs.
 
 Prints a table and writes benchmarks/out/track_speed.json.
-Run: /work/venv/bin/python benchmarks/track_speed.py [--frames 90] [--live-s 15] [--repeats 3]
+Run: python benchmarks/track_speed.py [--frames 90] [--live-s 15] [--repeats 3]
 """
 
 from __future__ import annotations
@@ -25,9 +25,9 @@ import numpy as np
 
 from photoservo.fileio import write_text_atomic
 from photoservo.robot import pa10
-from photoservo.robot.emulator import Emulator
-from photoservo.servo.config import load_config
-from photoservo.servo.recording import Recorder
+from photoservo.sim.emulator import Emulator
+from photoservo.config import load_config
+from photoservo.record.recorder import Recorder
 from photoservo.servo.session import Frame, Scores, _vision_step, build_sim, run_sim_realtime
 from photoservo.vision.tracker import Tracker
 

@@ -19,8 +19,8 @@ from calib_scene import (
     true_rig,
 )
 
-from photoservo.servo.cli import main
-from photoservo.servo.cmd_calibrate import pose_row, read_flange_poses, set_toml_key
+from photoservo.cli.main import main
+from photoservo.cli.calibrate import pose_row, read_flange_poses, set_toml_key
 from photoservo.vision.board import Board
 from photoservo.vision.calibrate import make_T, rotation_angle_deg
 from photoservo.vision.rig import Rig, load_rig, save_rig
@@ -316,7 +316,7 @@ def test_capture_at_interval_saves_pairs_and_preview(board_videos, tmp_path, cap
     assert not (out / "poses.csv").exists()
     # the preview recording holds every pair read, with the found corners drawn in colour on
     # the (grey) board images
-    from photoservo.servo.replay_io import iter_frames
+    from photoservo.record.reader import iter_frames
 
     frames = list(iter_frames(rrd))
     assert len(frames) >= 3
@@ -330,7 +330,7 @@ def test_capture_at_interval_saves_pairs_and_preview(board_videos, tmp_path, cap
 def test_capture_on_enter_in_a_terminal_process(board_videos, tmp_path):
     out = tmp_path / "cap"
     proc = subprocess.run(
-        [sys.executable, "-m", "photoservo.servo.cli", "calibrate", "capture", "--videos",
+        [sys.executable, "-m", "photoservo.cli", "calibrate", "capture", "--videos",
          str(board_videos / "l.avi"), str(board_videos / "r.avi"), "--save", str(tmp_path / "p.rrd"),
          "--out", str(out)],
         input="\n\nq\n", capture_output=True, text=True, timeout=60, check=False)
@@ -379,7 +379,7 @@ def test_capture_without_cameras_is_one_line(tmp_path, capsys):
 
 
 def _emulator(q0):
-    from photoservo.robot.emulator import Emulator, EmulatorParams
+    from photoservo.sim.emulator import Emulator, EmulatorParams
     from photoservo.tomlconf import build_dataclass, configs_dir, read_toml
 
     params = build_dataclass(EmulatorParams, read_toml(configs_dir() / "default.toml")["emulator"], "emulator")

@@ -8,10 +8,10 @@ import cv2
 import pytest
 
 from photoservo.fileio import write_image_atomic
-from photoservo.servo.cli import main
-from photoservo.servo.config import load_config
+from photoservo.cli.main import main
+from photoservo.config import load_config
 from photoservo.vision.rig import save_rig
-from photoservo.vision.synthetic import random_scene
+from photoservo.sim.renderer import random_scene
 
 DESIGN_KEYS = {"found", "position_mm", "rotation", "alpha_px_per_mm", "size_mm", "fitness", "generations", "seconds"}
 

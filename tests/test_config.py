@@ -1,8 +1,8 @@
 import pytest
 
 from photoservo.errors import InputError
-from photoservo.servo.cli import main
-from photoservo.servo.config import load_config
+from photoservo.cli.main import main
+from photoservo.config import load_config
 from photoservo.tomlconf import dump_config
 
 

@@ -9,7 +9,7 @@ import math
 import numpy as np
 import pytest
 
-from photoservo.servo.config import load_config
+from photoservo.config import load_config
 from photoservo.vision.estimator import (
     Convergence,
     GeneSpace,
@@ -21,8 +21,8 @@ from photoservo.vision.estimator import (
 )
 from photoservo.vision.fitness import stereo_hue
 from photoservo.vision.photo_model import build_photo_model
-from photoservo.vision.pose import heading_tilt_error, rotation_from_heading_tilt
-from photoservo.vision.synthetic import random_scene
+from photoservo.geometry import heading_tilt_error, rotation_from_heading_tilt
+from photoservo.sim.renderer import random_scene
 
 CFG = load_config()
 

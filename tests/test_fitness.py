@@ -12,7 +12,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from photoservo.errors import InputError
-from photoservo.servo.config import load_config
+from photoservo.config import load_config
 from photoservo.vision.fitness import (
     IN_MATCH,
     OUTSIDE,

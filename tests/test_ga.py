@@ -1,4 +1,4 @@
-"""The GA of method step 4 (vision/ga.py) and the heading/tilt parametrisation (vision/pose.py),
+"""The GA of method step 4 (vision/ga.py) and the heading/tilt parametrisation (geometry.py),
 on toy fitness functions: fast, seeded."""
 
 from __future__ import annotations
@@ -12,7 +12,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from photoservo.vision.ga import GA, PAPER_BITS, GAParams, Region, paper_params
-from photoservo.vision.pose import (
+from photoservo.geometry import (
     heading_tilt_error,
     heading_tilt_from_rotation,
     rotation_from_heading_tilt,

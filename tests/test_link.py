@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from photoservo.robot import protocol as P
-from photoservo.robot.emulator import Emulator, EmulatorParams
+from photoservo.sim.emulator import Emulator, EmulatorParams
 from photoservo.robot.link import Link, LinkError, LinkParams
 from photoservo.robot.pa10 import HOME_Q, fk, load_limits
 from photoservo.tomlconf import build_dataclass, configs_dir, read_toml
@@ -327,7 +327,7 @@ def test_exit_stops_and_disables(emu):
 
 def test_model_watchdog_decelerates_within_ddq_max():
     """BridgeModel on its own clock: after 3 silent periods, |Δdq| per tick <= ddq_max·T."""
-    from photoservo.robot.emulator import BridgeModel
+    from photoservo.sim.emulator import BridgeModel
 
     m = BridgeModel(LIMITS, emu_params(), now=0.0)
     m.handle(P.Frame(1, 1, P.Servo(True)), 0.0)
@@ -361,7 +361,7 @@ def test_model_watchdog_decelerates_within_ddq_max():
 
 
 def test_fault_injector_drops_corrupts_and_delays_in_order():
-    from photoservo.robot.emulator import FaultInjector
+    from photoservo.sim.emulator import FaultInjector
 
     rng = np.random.default_rng(0)
     data = bytes(range(1, 201))

@@ -14,9 +14,9 @@ import numpy as np
 import pytest
 
 from photoservo.robot import protocol as P
-from photoservo.robot.emulator import Emulator, EmulatorParams
+from photoservo.sim.emulator import Emulator, EmulatorParams
 from photoservo.robot.pa10 import HOME_Q
-from photoservo.servo.cli import main
+from photoservo.cli.main import main
 from photoservo.tomlconf import build_dataclass, configs_dir, read_toml
 
 PY = sys.executable
@@ -49,7 +49,7 @@ def test_move_reaches_target_and_disables(emu, tmp_path, capsys):
     # state, whose first setpoint can lie more than one period's travel behind the last one: the
     # bridge refuses a few such JUMPs and the stream heals (benchmarks/link.py counts them)
     assert set(emu.model.refusals) <= {"JUMP"} and emu.model.refused <= 10, emu.model.refusals
-    from photoservo.servo.recording import verify_rrd
+    from photoservo.record.recorder import verify_rrd
 
     files = sorted(tmp_path.glob("move*.rrd"))  # one file, or segments move.seg0001.rrd ...
     assert files and all(verify_rrd(f) == (True, verify_rrd(f)[1]) for f in files)
@@ -84,7 +84,7 @@ def test_move_bad_port_is_one_line_exit_2(tmp_path, capsys):
 
 def test_move_ctrl_c_makes_controlled_stop(emu):
     target = np.degrees(HOME_Q) + [60.0, 0, 0, 0, 0, 0, 0]  # ~3 s at 50 % speed
-    p = subprocess.Popen([PY, "-m", "photoservo.servo.cli", "move", "--port", emu.path, "--joints",
+    p = subprocess.Popen([PY, "-m", "photoservo.cli", "move", "--port", emu.path, "--joints",
                           *map(str, target), "--speed", "50", "--no-record"],
                          stderr=subprocess.PIPE, text=True)
     try:
@@ -105,7 +105,7 @@ def test_move_ctrl_c_makes_controlled_stop(emu):
 
 def test_pa10_sim_process_prints_path_links_and_stops(tmp_path):
     link = tmp_path / "pa10"
-    p = subprocess.Popen([PY, "-m", "photoservo.servo.cli", "pa10-sim", "--link", str(link)],
+    p = subprocess.Popen([PY, "-m", "photoservo.cli", "pa10-sim", "--link", str(link)],
                          stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
         path = p.stdout.readline().strip()

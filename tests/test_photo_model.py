@@ -12,8 +12,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from photoservo.errors import InputError
-from photoservo.servo.cli import main
-from photoservo.servo.config import load_config
+from photoservo.cli.main import main
+from photoservo.config import load_config
 from photoservo.vision.photo_model import (
     NO_HUE,
     build_photo_model,
@@ -24,7 +24,7 @@ from photoservo.vision.photo_model import (
     load_photo_model,
     parse_roi,
 )
-from photoservo.vision.specimens import SPECIES, specimen
+from photoservo.sim.specimens import SPECIES, specimen
 
 PARAMS = load_config().photo_model
 

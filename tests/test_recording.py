@@ -17,7 +17,7 @@ import pytest
 
 from photoservo.errors import InputError
 from photoservo.robot.pa10 import make_pose
-from photoservo.servo.recording import (
+from photoservo.record.recorder import (
     PREVIEW_WARNING,
     Recorder,
     default_path,
@@ -25,7 +25,7 @@ from photoservo.servo.recording import (
     segment_path,
     verify_rrd,
 )
-from photoservo.servo.replay_io import (
+from photoservo.record.reader import (
     compare_runs,
     iter_frames,
     read_recording,
@@ -179,7 +179,7 @@ import sys, time
 import numpy as np
 sys.path.insert(0, sys.argv[3])
 from test_recording import frame_pair
-from photoservo.servo.recording import Recorder
+from photoservo.record.recorder import Recorder
 path, segment_s = sys.argv[1], float(sys.argv[2])
 with Recorder.open(path, "track", segment_s=segment_s) as rec:
     rec.log_static_setup(None, None, None, "[x]\n", seed={"ga": 3, "world": 4})
@@ -415,7 +415,7 @@ def test_projected_points_and_desired_pose_are_drawn(tmp_path: Path):
 
 
 def test_recording_config_section(tmp_path: Path):
-    from photoservo.servo.config import load_config
+    from photoservo.config import load_config
     cfg = load_config(overrides=["recording.segment_s=0.1", f"recording.dir='{tmp_path}'"]).recording
     assert cfg.mode == "lossless"
     with Recorder.from_config(cfg, "move") as rec:

@@ -14,11 +14,11 @@ import numpy as np
 import pytest
 
 from photoservo.errors import InputError
-from photoservo.servo.cli import main
-from photoservo.servo.config import load_config
-from photoservo.servo.recording import Recorder, verify_rrd
-from photoservo.servo.replay import load_replay, replay
-from photoservo.servo.replay_io import iter_frames, read_recording
+from photoservo.cli.main import main
+from photoservo.config import load_config
+from photoservo.record.recorder import Recorder, verify_rrd
+from photoservo.record.replay import load_replay, replay
+from photoservo.record.reader import iter_frames, read_recording
 from photoservo.tomlconf import dump_config
 
 SHORT = ["--sim", "--lockstep", "--duration", "1.2", "--set", "sim.camera_fps=5"]
@@ -187,7 +187,7 @@ def test_bad_recordings_are_one_line_errors(recorded: Path, tmp_path: Path, caps
 
 def test_hold_error_row_against_hand_computed_numbers(tmp_path: Path):
     from photoservo.robot.pa10 import make_pose
-    from photoservo.servo.replay_io import run_metrics
+    from photoservo.record.reader import run_metrics
     from photoservo.vision.rig import Rig, default_rig, dump_rig
 
     base = default_rig()

@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 from _fitness_scene import ALPHA_TRUE, R_TRUE, T_TRUE, make_photo, render_stereo
 
-from photoservo.servo.cli import main
-from photoservo.servo.config import load_config
+from photoservo.cli.main import main
+from photoservo.config import load_config
 from photoservo.vision.photo_model import build_photo_model
 from photoservo.vision.rig import default_rig, save_rig
 from photoservo.vision.scan import ScanSlice, draw_slice, slice_poses

@@ -9,12 +9,12 @@ import pytest
 
 from photoservo.robot import pa10
 from photoservo.robot import protocol as P
-from photoservo.servo.cli import main
-from photoservo.servo.config import load_config
+from photoservo.cli.main import main
+from photoservo.config import load_config
 from photoservo.servo.motion import Motion
 from photoservo.servo.session import Controller, build_sim, left_centre, run_lockstep
-from photoservo.servo.world import LockstepArm, TargetMotion, sim_hand_eye
-from photoservo.vision.synthetic import synthetic_rig
+from photoservo.sim.world import LockstepArm, TargetMotion, sim_hand_eye
+from photoservo.sim.renderer import synthetic_rig
 from photoservo.vision.tracker import Track
 
 EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
@@ -149,7 +149,7 @@ def test_distractor_in_view_never_draws_the_arm():
 def test_realtime_session_over_a_real_pty_stops_and_disables_the_arm():
     """The control loop in its own process over the emulator's pty; the session ends with the arm
     at rest and the servo off, and the control process ran at its rate."""
-    from photoservo.robot.emulator import Emulator
+    from photoservo.sim.emulator import Emulator
     from photoservo.robot.link import Link
     from photoservo.servo.session import run_sim_realtime
 
@@ -180,11 +180,11 @@ def test_ctrl_c_stops_the_arm_and_leaves_a_verified_recording(tmp_path):
     import sys
     import time
 
-    from photoservo.servo.recording import verify_rrd
-    from photoservo.servo.replay_io import read_recording
+    from photoservo.record.recorder import verify_rrd
+    from photoservo.record.reader import read_recording
 
     rec = tmp_path / "ctrl_c.rrd"
-    proc = subprocess.Popen([sys.executable, "-m", "photoservo.servo.cli", "track", "--sim", "--duration", "60",
+    proc = subprocess.Popen([sys.executable, "-m", "photoservo.cli", "track", "--sim", "--duration", "60",
                              "--record", str(rec), "--set", "recording.segment_s=0.0", "--set", "sim.camera_fps=10.0"],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:

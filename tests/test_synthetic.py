@@ -9,11 +9,11 @@ import cv2
 import numpy as np
 import pytest
 
-from photoservo.servo.cli import main
-from photoservo.servo.config import load_config
+from photoservo.cli.main import main
+from photoservo.config import load_config
 from photoservo.vision.photo_model import build_photo_model, hue_image
 from photoservo.vision.rig import Camera, Rig, load_rig, project_points
-from photoservo.vision.synthetic import (
+from photoservo.sim.renderer import (
     EFFECTS,
     CameraEffects,
     Scene,

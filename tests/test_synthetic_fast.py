@@ -9,9 +9,9 @@ import numpy as np
 import pytest
 
 from photoservo.errors import InputError
-from photoservo.servo.config import load_config
+from photoservo.config import load_config
 from photoservo.vision.photo_model import NO_HUE, build_photo_model, hue_image
-from photoservo.vision.synthetic import (
+from photoservo.sim.renderer import (
     CameraEffects,
     Scene,
     StereoRenderer,

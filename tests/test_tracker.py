@@ -6,11 +6,11 @@ import numpy as np
 import pytest
 
 from photoservo.robot import pa10
-from photoservo.servo.config import load_config
+from photoservo.config import load_config
 from photoservo.servo.session import build_sim
 from photoservo.vision.estimator import GeneSpace
 from photoservo.vision.fitness import stereo_hue
-from photoservo.vision.synthetic import Scene
+from photoservo.sim.renderer import Scene
 from photoservo.vision.tracker import Tracker, on_plane
 
 

@@ -152,7 +152,7 @@ class Motion:
     the three steps once per control period with the latest state.
 
     >>> from photoservo.robot.pa10 import HOME_Q, load_limits
-    >>> from photoservo.servo.config import load_config
+    >>> from photoservo.config import load_config
     >>> m = Motion(load_config().motion, load_limits())
     >>> q, dq = HOME_Q.copy(), np.zeros(7)
     >>> target = HOME_Q + 0.1

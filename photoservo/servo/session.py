@@ -33,7 +33,7 @@ from photoservo.robot import pa10
 from photoservo.robot.pa10 import make_pose, pose_error
 from photoservo.robot import protocol as P
 from photoservo.robot.clock import Rate, set_realtime
-from photoservo.servo.config import Config
+from photoservo.config import Config
 from photoservo.servo.control import (
     ServoParams,
     camera_twist,
@@ -42,10 +42,10 @@ from photoservo.servo.control import (
     yaw_error_deg,
 )
 from photoservo.servo.motion import Motion, Setpoint
-from photoservo.servo.world import LockstepArm, SimScene, TargetMotion, sim_hand_eye
+from photoservo.sim.world import LockstepArm, SimScene, TargetMotion, sim_hand_eye
 from photoservo.vision.fitness import project_model, stereo_hue
 from photoservo.vision.rig import Rig
-from photoservo.vision.synthetic import synthetic_rig
+from photoservo.sim.renderer import synthetic_rig
 from photoservo.vision.tracker import Track, Tracker
 
 Phase = Literal["servo", "descend", "grasp", "ascend", "done", "stopped"]

@@ -18,7 +18,7 @@ import cv2
 import numpy as np
 
 from photoservo.errors import InputError
-from photoservo.vision.pose import make_pose as make_T  # one builder for the whole of vision/
+from photoservo.geometry import make_pose as make_T  # one builder for the whole of vision/
 from photoservo.vision.board import (
     Board,
     BoardDetection,

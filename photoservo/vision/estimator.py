@@ -9,7 +9,7 @@ is the rig's field of view and the fitness landscape is nearly separable:
 
     u, v    px   where the model origin projects in the LEFT image (pinhole, no distortion)
     q       1/m  inverse depth, q = 1000 / z          (uniform in q = uniform in disparity)
-    psi     rad  heading, tilt_x, tilt_y rad: tilt rotation vector (see `vision/pose.py`)
+    psi     rad  heading, tilt_x, tilt_y rad: tilt rotation vector (see `geometry.py`)
     ln s         s = fx / (alpha z): image px per photo px at a frontal pose
 
     t = z · K^-1 (u, v, 1),   alpha = fx / (s z),   R = R_tilt(tilt_x, tilt_y) · Rz(psi)
@@ -59,7 +59,7 @@ from photoservo.vision.fitness import (
 )
 from photoservo.vision.ga import GA, GAParams, Region
 from photoservo.vision.photo_model import HUE_BINS, PhotoModel
-from photoservo.vision.pose import (
+from photoservo.geometry import (
     heading_tilt_from_rotation,
     rotation_from_heading_tilt,
 )

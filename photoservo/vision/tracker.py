@@ -32,7 +32,7 @@ from photoservo.vision.estimator import EstimatorParams, PoseSearch, estimate
 from photoservo.vision.fitness import FitnessParams, StereoHue
 from photoservo.vision.ga import GAParams
 from photoservo.vision.photo_model import PhotoModel
-from photoservo.vision.pose import make_pose
+from photoservo.geometry import make_pose
 from photoservo.vision.rig import Rig
 
 Status = Literal["acquiring", "tracking", "coasting", "lost"]

@@ -25,7 +25,7 @@ Replay (`replay`), from the file alone:
     tune gains closed loop with `track --sim --world-from REC`.
   * output: a complete recording (static setup with the replay's effective config and the
     same seed, every frame again, estimates, truth copied, arm series, timings, events) that
-    can itself be replayed, and the side-by-side table (`replay_io.compare_runs`).
+    can itself be replayed, and the side-by-side table (`reader.compare_runs`).
 
 World from a recording (`world_from`): a simulated recording's effective config (its [sim]
 section: seed, target motion, cameras) and tracker seed rebuilt, the user's --config/--set on
@@ -48,8 +48,8 @@ from typing import Any
 import numpy as np
 
 from photoservo.errors import InputError
-from photoservo.servo.config import Config, load_config
-from photoservo.servo.replay_io import (
+from photoservo.config import Config, load_config
+from photoservo.record.reader import (
     Comparison,
     Frame,
     Recording,
@@ -245,7 +245,7 @@ def replay(setup: ReplaySetup, out: str | Path | None = None, *, view: bool = Fa
     from photoservo.robot import pa10
     from photoservo.servo import session as S
     from photoservo.servo.motion import Motion
-    from photoservo.servo.recording import Recorder
+    from photoservo.record.recorder import Recorder
     from photoservo.vision.rig import dump_rig
     from photoservo.vision.tracker import Tracker
 
@@ -375,12 +375,12 @@ def print_comparison(comparison: Comparison, file: Any = None) -> None:
 
 
 def track_world_from(args: Any, run_sim: Callable[[Any, Config], int]) -> int:
-    """`photoservo track --sim --world-from REC` (cmd_track calls this with its `_run_sim`):
+    """`photoservo track --sim --world-from REC` (cli/track.py calls this with its `_run_sim`):
     the recorded world with the new config, closed loop, then the comparison table. The run is
     recorded as usual (to a temporary file with --no-record, for the table)."""
     import tempfile
 
-    from photoservo.servo.recording import default_path
+    from photoservo.record.recorder import default_path
 
     if args.port:
         raise InputError("--world-from runs the simulator: it cannot be combined with --port")

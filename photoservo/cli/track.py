@@ -8,7 +8,7 @@ The main job: stereo frames -> a few GA generations per frame (vision/tracker.py
 (logs/<UTC time>_track.rrd by default).
 
 With --sim (the default when no cameras ([cameras] kind) or --port are configured) it starts
-the controller emulator on a pty and the simulated world (servo/world.py): a creature drifting,
+the controller emulator on a pty and the simulated world (sim/world.py): a creature drifting,
 heaving and rolling on the water, the stereo cameras on the simulated arm's flange. With
 `--lockstep` (or `--set sim.lockstep=true`) the simulation runs on its own clock instead of
 real time: slower than real time on this machine, but deterministic.
@@ -33,8 +33,8 @@ import sys
 
 from photoservo import __version__
 from photoservo.errors import InputError
-from photoservo.servo.cmd_config import add_config_options
-from photoservo.servo.config import load_config
+from photoservo.cli.config import add_config_options
+from photoservo.config import load_config
 from photoservo.tomlconf import dump_config
 
 
@@ -97,7 +97,7 @@ class _StatusLine:
 
 def run(args: argparse.Namespace) -> int:
     if args.world_from:
-        from photoservo.servo.replay import track_world_from
+        from photoservo.record.replay import track_world_from
 
         return track_world_from(args, _run_sim)
     args.duration = 20.0 if args.duration is None else args.duration
@@ -118,7 +118,7 @@ def run(args: argparse.Namespace) -> int:
 def _recorder(args, cfg):
     if args.no_record:
         return None
-    from photoservo.servo.recording import Recorder
+    from photoservo.record.recorder import Recorder
 
     return Recorder.from_config(cfg.recording, "track", args.record, view=args.view, connect_url=args.connect)
 
@@ -153,7 +153,7 @@ def _report(args, sc, rec) -> int:
 
 def _recording_files(rec) -> str:
     """The file(s) actually written: the path itself, or its finished segments."""
-    from photoservo.servo.recording import segment_path
+    from photoservo.record.recorder import segment_path
 
     if rec.segment_s <= 0:
         return str(rec.path)
@@ -163,7 +163,7 @@ def _recording_files(rec) -> str:
 
 
 def _run_sim(args, cfg) -> int:
-    from photoservo.robot.emulator import Emulator
+    from photoservo.sim.emulator import Emulator
     from photoservo.servo.session import build_sim, run_lockstep, run_sim_realtime
 
     if args.lockstep:  # the recorded effective config then says how the run was clocked (replay reads it)

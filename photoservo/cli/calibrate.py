@@ -37,8 +37,8 @@ import numpy as np
 from photoservo.errors import InputError
 from photoservo.fileio import read_image, write_image_atomic, write_text_atomic
 from photoservo.robot.link import Link, LinkError
-from photoservo.servo.cmd_config import add_config_options
-from photoservo.servo.config import load_config
+from photoservo.cli.config import add_config_options
+from photoservo.config import load_config
 from photoservo.tomlconf import configs_dir, read_toml
 from photoservo.vision.board import (
     DEFAULT_DICTIONARY,
@@ -619,7 +619,7 @@ class _EnterKey:
 
 
 def run_capture(args: argparse.Namespace) -> int:
-    from photoservo.servo.recording import Recorder
+    from photoservo.record.recorder import Recorder
 
     if args.interval < 0 or args.count < 0:
         raise InputError("--interval and --count must be >= 0")

@@ -31,9 +31,9 @@ from photoservo.errors import InputError
 from photoservo.robot.clock import Rate
 from photoservo.robot.link import Link, LinkError
 from photoservo.robot.pa10 import HOME_Q, JOINT_NAMES, load_limits
-from photoservo.servo.cmd_config import add_config_options
-from photoservo.servo.cmd_pa10_sim import realtime_or_input_error
-from photoservo.servo.config import load_config
+from photoservo.cli.config import add_config_options
+from photoservo.cli.pa10_sim import realtime_or_input_error
+from photoservo.config import load_config
 from photoservo.servo.motion import Motion
 from photoservo.tomlconf import dump_config
 
@@ -89,7 +89,7 @@ def parse_target(args: argparse.Namespace) -> np.ndarray:
 def _open_recorder(args: argparse.Namespace, cfg):
     if args.no_record:
         return None
-    from photoservo.servo.recording import Recorder
+    from photoservo.record.recorder import Recorder
 
     rec = Recorder.open(args.record, "move", mode=cfg.recording.mode, segment_s=cfg.recording.segment_s,
                         logs_dir=cfg.recording.dir)

@@ -1,7 +1,7 @@
 """Synthetic stereo views of a photo's target floating on water (issue 2, item 7).
 
 This module renders from camera poses it is GIVEN (DESIGN.md): it never knows about the arm.
-The arm simulator (servo/world.py) and the scene generator `random_scene` hand it poses.
+The arm simulator (sim/world.py) and the scene generator `random_scene` hand it poses.
 
 Frames and units
   * World frame: mm, z up; the water surface is the plane z = 0 (waves only tilt its normal for
@@ -41,7 +41,7 @@ import cv2
 import numpy as np
 
 from photoservo.errors import InputError
-from photoservo.vision.pose import make_pose as make_transform  # one builder for vision/
+from photoservo.geometry import make_pose as make_transform  # one builder for vision/
 from photoservo.vision.photo_model import PhotoModel, hue_distance
 from photoservo.vision.rig import Camera, Rig
 
@@ -493,7 +493,7 @@ def render_view(scene: Scene, cam: Camera, T_world_cam: np.ndarray, t: float = 0
     rays_w = rays if not fast else coarse_rays(rays, water_stride) if water_rays is None else water_rays
     w = scene.water
     if compiled:
-        from photoservo.vision import synthetic_kernel as sk
+        from photoservo.sim import renderer_kernel as sk
 
         dx, dy = _ripple_slopes(w.seed)
         img, shade, P, water, d = sk.shade_water(rays_w, R, C, w.waves, t, w.ripple, dx, dy,
@@ -775,7 +775,7 @@ def random_scene(seed: int, params: SynthParams, photo_params, kind: str = "squi
     Extra keys: distance_mm (depth of the creature's model origin), tilt_deg, same_photo,
     creature_size_mm, calibration_error, effects, distractors, seed."""
     from photoservo.vision.photo_model import build_photo_model
-    from photoservo.vision.specimens import specimen
+    from photoservo.sim.specimens import specimen
 
     if photo is not None and other_photo and estimator_photo is None:
         raise InputError("other_photo with a given photo needs the other individual's estimator_photo")

@@ -21,9 +21,9 @@ from pathlib import Path
 
 from photoservo.errors import InputError
 from photoservo.fileio import write_image_atomic, write_text_atomic
-from photoservo.servo.cmd_config import add_config_options
-from photoservo.servo.cmd_estimate import add_stereo_inputs, load_stereo_inputs
-from photoservo.servo.config import load_config
+from photoservo.cli.config import add_config_options
+from photoservo.cli.estimate import add_stereo_inputs, load_stereo_inputs
+from photoservo.config import load_config
 from photoservo.vision.fitness import stereo_hue
 from photoservo.vision.scan import AXES, draw_slice, load_pose, scan_slice
 

@@ -15,19 +15,19 @@ from pathlib import Path
 from typing import Any, Sequence
 
 from photoservo.errors import InputError
-from photoservo.robot.emulator import EmulatorParams
+from photoservo.sim.emulator import EmulatorParams
 from photoservo.robot.link import LinkParams
 from photoservo.tomlconf import build_dataclass, configs_dir, read_toml
 from photoservo.vision.estimator import EstimatorParams
 from photoservo.vision.ga import GAParams
 from photoservo.servo.control import ServoParams
 from photoservo.servo.motion import MotionParams
-from photoservo.servo.recording import RecordingParams
-from photoservo.servo.world import SimParams
+from photoservo.record.recorder import RecordingParams
+from photoservo.sim.world import SimParams
 from photoservo.vision.fitness import FitnessParams
 from photoservo.vision.photo_model import PhotoModelParams
 from photoservo.vision.sources import CamerasParams
-from photoservo.vision.synthetic import SynthParams
+from photoservo.sim.renderer import SynthParams
 from photoservo.vision.tracker import TrackerParams
 
 

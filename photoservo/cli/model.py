@@ -14,8 +14,8 @@ import argparse
 import numpy as np
 
 from photoservo.fileio import read_image, write_image_atomic
-from photoservo.servo.cmd_config import add_config_options
-from photoservo.servo.config import load_config
+from photoservo.cli.config import add_config_options
+from photoservo.config import load_config
 from photoservo.vision.photo_model import draw_photo_model, load_photo_model, parse_roi
 
 

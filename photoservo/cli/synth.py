@@ -2,7 +2,7 @@
                   [--distance MM] [--tilt-deg DEG] [--empty] [--distractor] [--effects LIST]
                   [--rig RIG.toml] [--config CFG.toml] [--set key=value ...] --out DIR
 
-Renders a synthetic stereo scene (vision/synthetic.py): a creature lying on water seen by a rig
+Renders a synthetic stereo scene (sim/renderer.py): a creature lying on water seen by a rig
 whose rendering calibration differs from the written one by the [synthetic] calibration error.
 Writes DIR/left.png, DIR/right.png, DIR/rig.toml (the rig the estimator is told), DIR/truth.json
 (ground truth in the estimate-JSON shape, for the photo in DIR/photo.png) and DIR/photo.png
@@ -20,12 +20,12 @@ from pathlib import Path
 
 from photoservo.errors import InputError
 from photoservo.fileio import read_image, write_image_atomic, write_text_atomic
-from photoservo.servo.cmd_config import add_config_options
-from photoservo.servo.config import load_config
+from photoservo.cli.config import add_config_options
+from photoservo.config import load_config
 from photoservo.vision.photo_model import load_photo_model
 from photoservo.vision.rig import dump_rig, load_rig
-from photoservo.vision.specimens import SPECIES
-from photoservo.vision.synthetic import DEFAULT_EFFECTS, EFFECTS, random_scene
+from photoservo.sim.specimens import SPECIES
+from photoservo.sim.renderer import DEFAULT_EFFECTS, EFFECTS, random_scene
 
 
 def parse_effects(text: str) -> tuple[str, ...]:

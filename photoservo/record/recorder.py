@@ -2,7 +2,7 @@
 
 The recorder listens on the side of the loop (frames -> estimator -> pose -> control -> arm):
 the loop hands it what it already has and it writes a `.rrd` file (rerun-sdk 0.41, pinned <0.42:
-`photoservo.servo.replay_io` reads files back with `rerun.chunk.RrdReader`).
+`photoservo.record.reader` reads files back with `rerun.chunk.RrdReader`).
 
 API (one `Recorder` per run; thread-safe; no global rerun state — a `rr.RecordingStream`)::
 
@@ -81,7 +81,7 @@ written as `<stem>.segNNNN.partial.rrd` and renamed when rerun has written its f
 `.segNNNN.rrd` is complete and verifies; after a kill only the `.partial.rrd` tail is cut short.
 Each segment is a complete recording with the static setup (and blueprint) repeated, all with
 the same recording id, so the viewer opens them together as one recording, and
-`replay_io.read_recording(<stem>.rrd)` reads them as one (the partial tail as far as it goes).
+`reader.read_recording(<stem>.rrd)` reads them as one (the partial tail as far as it goes).
 """
 
 from __future__ import annotations
@@ -155,7 +155,7 @@ JOINT_NAMES = ("S1", "S2", "S3", "E1", "E2", "W1", "W2")
 PREVIEW_WARNING = ("PREVIEW RECORDING: frames are JPEG (lossy, hue changes). This recording "
                    "is for viewing only and CANNOT be replayed.")
 
-# entity paths (replay_io reads the same constants)
+# entity paths (reader readss the same constants)
 E_RUN, E_RIG_TOML, E_CONFIG, E_WARNING = "setup/run", "setup/rig", "setup/config", "setup/WARNING"
 E_MODEL, E_PHOTO = "setup/photo_model", "setup/photo_model/photo"
 E_CAM = {"left": "world/rig/left", "right": "world/rig/right"}

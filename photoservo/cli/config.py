@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import argparse
 
-from photoservo.servo.config import load_config
+from photoservo.config import load_config
 from photoservo.tomlconf import dump_config
 
 

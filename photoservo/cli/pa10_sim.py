@@ -1,7 +1,7 @@
 """photoservo pa10-sim [--link PATH] [--baud N] [--rate HZ] [--drop P] [--corrupt P]
                       [--delay P] [--delay-ms MS] [--seed N] [--config CFG.toml] [--set ...]
 
-The PA-10 serial-bridge emulator (photoservo/robot/emulator.py) on a pseudo-terminal: prints the
+The PA-10 serial-bridge emulator (photoservo/sim/emulator.py) on a pseudo-terminal: prints the
 device path on stdout (one line), optionally symlinks it at --link, and speaks the bridge
 protocol (docs/protocol.md) until Ctrl-C or SIGTERM. Defaults from the [emulator] config section.
 
@@ -20,9 +20,9 @@ import threading
 
 from photoservo.errors import InputError
 from photoservo.robot.clock import set_realtime
-from photoservo.robot.emulator import Emulator
-from photoservo.servo.cmd_config import add_config_options
-from photoservo.servo.config import load_config
+from photoservo.sim.emulator import Emulator
+from photoservo.cli.config import add_config_options
+from photoservo.config import load_config
 
 # CLI flag -> [emulator] key
 FLAGS = {"baud": "baud", "rate": "control_hz", "drop": "drop", "corrupt": "corrupt",

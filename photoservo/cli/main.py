@@ -1,4 +1,4 @@
-"""`photoservo` — one verb per module (`photoservo/servo/cmd_<verb>.py`), each with
+"""`photoservo` — one verb per module (`photoservo/cli/<verb>.py`), each with
 `add_arguments(parser)` and `run(args) -> int`. Only the chosen verb's module is imported.
 
 Bad input (an InputError) prints one line naming the problem and exits with status 2.
@@ -15,16 +15,16 @@ from photoservo.errors import InputError
 
 # verb -> (module, one-line help). Add a verb here when its module lands.
 VERBS: dict[str, tuple[str, str]] = {
-    "config": ("photoservo.servo.cmd_config", "print the effective configuration"),
-    "calibrate": ("photoservo.servo.cmd_calibrate", "calibrate the stereo rig, hand-eye transform and water plane"),
-    "model": ("photoservo.servo.cmd_model", "build the photo-model of a photo and preview its sampling points"),
-    "synth": ("photoservo.servo.cmd_synth", "render a synthetic stereo scene with ground truth"),
-    "scan": ("photoservo.servo.cmd_scan", "fitness maps (pose axis x alpha) around a given pose, as heatmap PNGs"),
-    "estimate": ("photoservo.servo.cmd_estimate", "find the photo's creature in a stereo pair: 6-DOF pose and size"),
-    "pa10-sim": ("photoservo.servo.cmd_pa10_sim", "PA-10 serial-bridge emulator on a pty (prints the device path)"),
-    "move": ("photoservo.servo.cmd_move", "move the arm to joint angles (deg) or home through the bridge, jerk-limited"),
-    "track": ("photoservo.servo.cmd_track", "track a floating creature and servo the arm over it (main job)"),
-    "replay": ("photoservo.servo.cmd_replay", "re-run a recording's tracker and control law with a changed config; compare"),
+    "config": ("photoservo.cli.config", "print the effective configuration"),
+    "calibrate": ("photoservo.cli.calibrate", "calibrate the stereo rig, hand-eye transform and water plane"),
+    "model": ("photoservo.cli.model", "build the photo-model of a photo and preview its sampling points"),
+    "synth": ("photoservo.cli.synth", "render a synthetic stereo scene with ground truth"),
+    "scan": ("photoservo.cli.scan", "fitness maps (pose axis x alpha) around a given pose, as heatmap PNGs"),
+    "estimate": ("photoservo.cli.estimate", "find the photo's creature in a stereo pair: 6-DOF pose and size"),
+    "pa10-sim": ("photoservo.cli.pa10_sim", "PA-10 serial-bridge emulator on a pty (prints the device path)"),
+    "move": ("photoservo.cli.move", "move the arm to joint angles (deg) or home through the bridge, jerk-limited"),
+    "track": ("photoservo.cli.track", "track a floating creature and servo the arm over it (main job)"),
+    "replay": ("photoservo.cli.replay", "re-run a recording's tracker and control law with a changed config; compare"),
 }
 
 

@@ -22,12 +22,12 @@ import numpy as np
 
 from photoservo.errors import InputError
 from photoservo.fileio import read_image, write_image_atomic
-from photoservo.servo.cmd_config import add_config_options
-from photoservo.servo.config import Config, load_config
+from photoservo.cli.config import add_config_options
+from photoservo.config import Config, load_config
 from photoservo.vision.estimator import Estimate, estimate
 from photoservo.vision.fitness import project_model
 from photoservo.vision.photo_model import PhotoModel, load_photo_model, parse_roi
-from photoservo.vision.pose import heading_tilt_from_rotation
+from photoservo.geometry import heading_tilt_from_rotation
 from photoservo.vision.rig import Rig, load_rig
 
 

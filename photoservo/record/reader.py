@@ -1,6 +1,6 @@
 """Reading recordings back (issue 6, the reading side of replay) and comparing two runs.
 
-`read_recording(path)` reads a `.rrd` written by `servo.recording.Recorder` — one file, or all
+`read_recording(path)` reads a `.rrd` written by `record.recorder.Recorder` — one file, or all
 segments `<stem>.seg0001.rrd ...` of a segmented recording as one — with
 `rerun.chunk.RrdReader` (rerun-sdk 0.41; `rerun.dataframe` no longer exists) into plain
 dataclasses: the static setup (rig TOML, effective config TOML, photo, PhotoModel, seed,
@@ -39,7 +39,7 @@ from rerun.chunk import RrdReader
 
 from photoservo.errors import InputError
 from photoservo.robot.pa10 import make_pose
-from photoservo.servo import recording as R_
+from photoservo.record import recorder as R_
 
 _SEG = re.compile(r"^(?P<stem>.*)\.seg(?P<n>\d{4,})(?P<partial>\.partial)?$")
 

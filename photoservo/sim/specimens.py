@@ -8,7 +8,7 @@ different backdrop. Both photos show the creature in the same orientation (head/
 photographed from above or from the side), so one model-frame rotation fits both.
 
 The shipped PNGs in examples/photos/ are `specimen(kind, 0)` and `specimen(kind, 0, other=True)`;
-regenerate them with `python -m photoservo.vision.specimens examples/photos`.
+regenerate them with `python -m photoservo.sim.specimens examples/photos`.
 """
 
 from __future__ import annotations

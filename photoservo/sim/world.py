@@ -18,13 +18,13 @@ import numpy as np
 from photoservo.errors import InputError
 from photoservo.fileio import read_image
 from photoservo.robot import protocol as P
-from photoservo.robot.emulator import BridgeModel, EmulatorParams
+from photoservo.sim.emulator import BridgeModel, EmulatorParams
 from photoservo.robot.link import LinkError
 from photoservo.robot.pa10 import PA10Limits
 from photoservo.vision.photo_model import PhotoModelParams, build_photo_model
 from photoservo.vision.rig import Rig
-from photoservo.vision.specimens import specimen
-from photoservo.vision.synthetic import (
+from photoservo.sim.specimens import specimen
+from photoservo.sim.renderer import (
     CameraEffects,
     Scene,
     StereoRenderer,
@@ -139,7 +139,7 @@ SIM_WATER_STRIDE = 4  # render_view's fast path: water shaded per 4x4 block, tar
 
 class SimScene:
     """What the simulated cameras see: water at `water_z_mm` in the base frame, the target (and
-    optionally a look-alike) moving per `TargetMotion`. Renders with vision/synthetic.py from the
+    optionally a look-alike) moving per `TargetMotion`. Renders with sim/renderer.py from the
     camera poses the session hands it (T_base_left at each camera's own exposure time)."""
 
     def __init__(self, params: SimParams, photo_params: PhotoModelParams, rig: Rig) -> None:
@@ -204,7 +204,7 @@ class ArmState:
 
 
 class LockstepArm:
-    """The controller emulator's bridge (robot/emulator.py `BridgeModel`) clocked by the
+    """The controller emulator's bridge (sim/emulator.py `BridgeModel`) clocked by the
     simulation instead of a thread: every host message is encoded with the wire protocol and
     decoded by a protocol `Decoder` — the same bytes a pty would carry — but time advances only
     when the session calls `tick(now)`, so a lockstep run is deterministic. The session's

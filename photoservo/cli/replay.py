@@ -1,7 +1,7 @@
 """photoservo replay REC.rrd [--config CFG.toml] [--set key=value ...] [--out NEW.rrd] [--view]
                         [--fixed-generations] [--json]
 
-Re-runs a recorded session from its file alone (servo/replay.py): the recorded frames through
+Re-runs a recorded session from its file alone (record/replay.py): the recorded frames through
 the tracker with the recorded seed (deterministic: no time budget), the control law open loop on
 the recorded joint states, with the recorded config changed by --config/--set; writes a new,
 complete recording (default logs/<UTC time>_replay.rrd) and prints the two runs side by side.
@@ -21,7 +21,7 @@ import json
 import math
 import sys
 
-from photoservo.servo.cmd_config import add_config_options
+from photoservo.cli.config import add_config_options
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -36,7 +36,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from photoservo.servo.replay import load_replay, replay
+    from photoservo.record.replay import load_replay, replay
 
     setup = load_replay(args.recording, args.config, args.overrides, args.fixed_generations)
     n = len(setup.recording.frames)

@@ -1,0 +1,1 @@
+"""The command line: `photoservo VERB ...` - one thin module per verb (main.py lists them)."""

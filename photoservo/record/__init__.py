@@ -1,0 +1,1 @@
+"""Rerun recordings: the recorder, the reader, comparison and replay."""
