@@ -1,14 +1,20 @@
 """photoservo synth --specimen squid|--photo PHOTO [--other|--estimator-photo PHOTO2] [--seed N]
                   [--distance MM] [--tilt-deg DEG] [--empty] [--distractor] [--effects LIST]
+                  [--generator renderer|harbour] [--foam-split] [--many-hued]
                   [--rig RIG.toml] [--config CFG.toml] [--set key=value ...] --out DIR
 
-Renders a synthetic stereo scene (sim/renderer.py): a creature lying on water seen by a rig
-whose rendering calibration differs from the written one by the [synthetic] calibration error.
+Renders a synthetic stereo scene: a creature lying on water seen by a rig whose rendering
+calibration differs from the written one by the [synthetic] calibration error. The generator is
+sim/renderer.py ("renderer", the default) or the independent second generator
+sim/harbour.py ("harbour": its own procedural creatures, water, foam, debris and light; with
+--foam-split, a foam band cuts the creature in two; --many-hued, a fish in many hues including
+the water's).
 Writes DIR/left.png, DIR/right.png, DIR/rig.toml (the rig the estimator is told), DIR/truth.json
 (ground truth in the estimate-JSON shape, for the photo in DIR/photo.png) and DIR/photo.png
 (the photo the estimator should use), each atomically.
 
     photoservo synth --specimen squid --seed 3 --distance 700 --out scene/
+    photoservo synth --generator harbour --specimen fish --many-hued --seed 3 --out scene/
     photoservo estimate --rig scene/rig.toml --photo scene/photo.png --left scene/left.png --right scene/right.png
 """
 
@@ -63,6 +69,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--distractor", action="store_true", help="add a look-alike elsewhere in view")
     p.add_argument("--effects", default=",".join(DEFAULT_EFFECTS), metavar="LIST",
                    help=f"comma list of {', '.join(EFFECTS)}; or all / none (default: %(default)s)")
+    p.add_argument("--generator", choices=("renderer", "harbour"), default="renderer",
+                   help="scene generator: sim/renderer.py (default) or the independent sim/harbour.py")
+    p.add_argument("--foam-split", action="store_true", help="harbour: a foam band cuts the creature in two")
+    p.add_argument("--many-hued", action="store_true", help="harbour, fish: a creature in many hues, the water's among them")
     p.add_argument("--rig", metavar="RIG.toml", help="rig to render and write (default: the synthetic rig)")
     add_config_options(p)
     p.add_argument("--out", required=True, metavar="DIR", help="output folder")
@@ -77,6 +87,15 @@ def run(args: argparse.Namespace) -> int:
         raise InputError(f"--tilt-deg {args.tilt_deg}: must be within 0..75 degrees")
     if args.other and args.photo:
         raise InputError("--other: only with --specimen; give --estimator-photo PHOTO2 with --photo")
+    if args.generator == "harbour":
+        if args.photo or args.estimator_photo:
+            raise InputError("--generator harbour draws its own creatures: use --specimen, not --photo / --estimator-photo")
+        if args.effects != ",".join(DEFAULT_EFFECTS):
+            raise InputError("--effects: only with --generator renderer (harbour scenes carry their own light, waves and foam)")
+        if args.many_hued and args.specimen != "fish":
+            raise InputError("--many-hued: only with --specimen fish")
+    elif args.foam_split or args.many_hued:
+        raise InputError("--foam-split / --many-hued: only with --generator harbour")
     out = Path(args.out)
     if out.exists() and not out.is_dir():
         raise InputError(f"--out {out}: exists and is not a folder")
@@ -88,10 +107,18 @@ def run(args: argparse.Namespace) -> int:
     if args.estimator_photo:
         load_photo_model(args.estimator_photo, cfg.photo_model)
         est = read_image(args.estimator_photo, "photo")
-    sc = random_scene(args.seed, cfg.synthetic, cfg.photo_model, kind=args.specimen or "squid",
-                      other_photo=bool(args.other), effects=effects, empty=args.empty,
-                      distractor=args.distractor, distance_mm=args.distance, tilt_deg=args.tilt_deg,
-                      photo=photo, estimator_photo=est, rig=rig)
+    if args.generator == "harbour":
+        from photoservo.sim import harbour
+
+        sc = harbour.random_scene(args.seed, cfg.synthetic, cfg.photo_model, kind=args.specimen,
+                                  other_photo=bool(args.other), empty=args.empty, distractor=args.distractor,
+                                  foam_split=args.foam_split, many_hued=args.many_hued,
+                                  distance_mm=args.distance, tilt_deg=args.tilt_deg, rig=rig)
+    else:
+        sc = random_scene(args.seed, cfg.synthetic, cfg.photo_model, kind=args.specimen or "squid",
+                          other_photo=bool(args.other), effects=effects, empty=args.empty,
+                          distractor=args.distractor, distance_mm=args.distance, tilt_deg=args.tilt_deg,
+                          photo=photo, estimator_photo=est, rig=rig)
     truth = dict(sc.truth)
     truth["photo"] = "photo.png"
     write_image_atomic(out / "left.png", sc.left)

@@ -725,6 +725,20 @@ def _camera_pose(rng: np.random.Generator, rig: Rig, corners_model: np.ndarray, 
     return None
 
 
+def match_individuals(model_A: PhotoModel, model_B: PhotoModel, alpha_A: float) -> tuple[float, np.ndarray]:
+    """Ground truth for another individual's photo (`random_scene`'s other-photo case): the
+    photo-model B of the estimator's photo laid onto creature A (photo-model A at alpha_A px/mm)
+    by equal mask area in mm² (alpha_B = alpha_A · sqrt(area_B / area_A)) and coincident mask
+    centroids. Returns (alpha_B px/mm, position of B's origin in A's model frame (3,) mm)."""
+    def centroid(m: PhotoModel) -> np.ndarray:
+        ys, xs = np.nonzero(m.mask)
+        return np.array([xs.mean(), ys.mean()])
+
+    s = math.sqrt(np.count_nonzero(model_A.mask) / np.count_nonzero(model_B.mask))  # A px per B px
+    xA = centroid(model_A) + (np.array(model_B.origin_px) - centroid(model_B)) * s
+    return alpha_A / s, np.array([*(xA - np.array(model_A.origin_px)) / alpha_A, 0.0])
+
+
 def _buoy_photo(hue: int, rng: np.random.Generator) -> np.ndarray:
     """A 'buoy' look-alike: a shaded disc in the target's hue with a dark band, on white."""
     img = np.full((160, 160, 3), 240, np.uint8)
@@ -885,17 +899,7 @@ def random_scene(seed: int, params: SynthParams, photo_params, kind: str = "squi
     # ground truth for the estimator's photo-model (see docstring)
     T_left_model = T_left_world @ T_world_model
     R = T_left_model[:3, :3]
-    if same:
-        alpha, origin_mm = alpha_A, np.zeros(3)
-    else:
-        def centroid(m: PhotoModel) -> np.ndarray:
-            ys, xs = np.nonzero(m.mask)
-            return np.array([xs.mean(), ys.mean()])
-
-        s = math.sqrt(np.count_nonzero(model_A.mask) / np.count_nonzero(model_B.mask))  # A px per B px
-        alpha = alpha_A / s
-        xA = centroid(model_A) + (np.array(model_B.origin_px) - centroid(model_B)) * s
-        origin_mm = np.array([*(xA - np.array(model_A.origin_px)) / alpha_A, 0.0])
+    alpha, origin_mm = (alpha_A, np.zeros(3)) if same else match_individuals(model_A, model_B, alpha_A)
     position = R @ origin_mm + T_left_model[:3, 3]
     truth = {
         "found": not empty,

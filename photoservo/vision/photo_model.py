@@ -238,7 +238,9 @@ def _sample(photo_hue: np.ndarray, mask: np.ndarray, origin: tuple[float, float]
     ys, xs = np.nonzero(mask)
     pts = _grid(origin, interval, xs.min(), xs.max(), ys.min(), ys.max())
     ij = np.rint(pts).astype(int)
-    on = mask[ij[:, 1], ij[:, 0]] > 0
+    inside = (ij[:, 0] >= 0) & (ij[:, 0] < W) & (ij[:, 1] >= 0) & (ij[:, 1] < H)
+    ij = np.clip(ij, 0, [W - 1, H - 1])  # a target touching the photo's edge: grid points past it are off
+    on = inside & (mask[ij[:, 1], ij[:, 0]] > 0)
     pin = pts[on]
     r = int(np.clip(round(interval / 2), 1, 3))
     off = np.arange(-r, r + 1)
