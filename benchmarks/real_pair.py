@@ -1,0 +1,168 @@
+"""The estimator on a REAL calibrated stereo pair with ground truth (issue 9): Middlebury 2014
+"Motorcycle" as scikit-image ships it (sim/middlebury.py: calibration, targets, truth).
+
+Cases: 3 red targets of distinct shapes (fuel tank, front fender, a crate on the shelf behind)
+x 3 photo variants (cut from the left image, cut from the right image, the left cut at 0.6x).
+Each runs `estimate` from the default search volume except the depth range, widened to
+500-5000 mm (the targets are 2.2-3.7 m away; a user sets it with --set estimator.z_max_mm=5000),
+with the default configuration otherwise (`--set` to change it).
+
+Per case: found; the right object (the best candidate's model origin projects into the target's
+box in the left image; judged whether or not the candidate passed detection); depth error (% of
+the true depth), lateral error (x, y in the left camera, % of the true depth), size error
+(|alpha_true / alpha_est - 1|, %) of the best candidate; its fitness and detection score; the
+fitness of the truth pose; the fitness of the same model at 200 random poses of the search
+volume (the per-frame null: median and 99th percentile) and where truth and estimate stand in
+it; wall and CPU seconds. `--size-mm LO,HI` adds a size prior (alpha range per photo such
+that the target's longest side is LO..HI mm). Targets (issue 9): every case found and the right object, depth
+<= 5 %, lateral <= 5 % of depth, size <= 15 %.
+
+Prints a table and writes benchmarks/out/real_pair.json.
+Run: /work/venv/bin/python benchmarks/real_pair.py [--set KEY=VALUE ...] [--scale 1.0]
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+import math
+import os
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+from photoservo.config import load_config
+from photoservo.fileio import write_text_atomic
+from photoservo.sim.middlebury import real_cases
+from photoservo.vision.estimator import GeneSpace, estimate
+from photoservo.vision.fitness import fitness, stereo_hue
+from photoservo.vision.rig import project_points
+
+TARGETS = {"depth_pct": 5.0, "lateral_pct": 5.0, "size_pct": 15.0}
+NULL_POSES = 200
+
+
+def null_fitness(case, cfg, n: int, seed: int) -> np.ndarray:
+    """Fitness of the case's model at n random poses of the search volume (the frame's null)."""
+    space = GeneSpace(cfg.estimator.genes, case.rig, case.model, cfg.estimator)
+    g = space.full_region().sample(np.random.default_rng(seed), 4 * n)
+    R, t, alpha, valid = space.decode(g)
+    frame = stereo_hue(case.left, case.right, cfg.fitness)
+    f = fitness(R[valid][:n], t[valid][:n], alpha[valid][:n], case.model, frame, case.rig, cfg.fitness)
+    return f
+
+
+def size_prior(case, cfg, size_mm: tuple[float, float] | None):
+    """cfg with alpha_min/alpha_max set so that the model's longest side is size_mm[0]..[1] mm
+    (what a user who knows the object's rough size would set); cfg unchanged for None."""
+    if size_mm is None:
+        return cfg
+    longest = max(case.model.size_px)
+    est = dataclasses.replace(cfg.estimator, alpha_min=longest / size_mm[1], alpha_max=longest / size_mm[0])
+    return dataclasses.replace(cfg, estimator=est)
+
+
+def run_case(case, cfg, seed: int) -> dict:
+    tr = case.truth
+    frame = stereo_hue(case.left, case.right, cfg.fitness)
+    t_true = np.array(tr["position_mm"])
+    f_truth = float(fitness(np.eye(3), t_true, tr["alpha_px_per_mm"], case.model, frame, case.rig, cfg.fitness)[0])
+    c0 = time.process_time()
+    est = estimate(case.model, case.left, case.right, case.rig, cfg.ga, cfg.estimator, cfg.fitness, seed=seed,
+                   frame=frame)
+    cpu = time.process_time() - c0
+    null = null_fitness(case, cfg, NULL_POSES, seed)
+    row = {"target": case.target, "variant": case.variant, "distance_mm": tr["distance_mm"], "found": bool(est.found),
+           "fitness_truth": f_truth, "null_median": float(np.median(null)), "null_p99": float(np.percentile(null, 99)),
+           "seconds": est.seconds, "cpu_seconds": cpu, "inner_points": len(case.model.inner_uv)}
+    if not est.candidates:
+        row.update(right_object=False, depth_pct=math.inf, lateral_pct=math.inf, size_pct=math.inf, fitness=None,
+                   detection_score=None)
+        return row
+    c = est.candidates[0]
+    p = np.array(c["position_mm"])
+    z = t_true[2]
+    uv = project_points(p, case.rig.left)
+    x, y, w, h = tr["box_px"]
+    right_object = bool(np.all(np.isfinite(uv)) and x <= uv[0] <= x + w and y <= uv[1] <= y + h)
+    spread = max(row["null_p99"] - row["null_median"], 1e-9)
+    row.update(right_object=right_object, depth_pct=100 * abs(p[2] - z) / z,
+               lateral_pct=100 * float(np.linalg.norm(p[:2] - t_true[:2])) / z,
+               size_pct=100 * abs(tr["alpha_px_per_mm"] / c["alpha_px_per_mm"] - 1),
+               fitness=c["fitness"], detection_score=c["detection_score"],
+               truth_over_null=(f_truth - row["null_median"]) / spread,
+               estimate_over_null=(c["fitness"] - row["null_median"]) / spread)
+    return row
+
+
+def ok(r: dict) -> bool:
+    return (r["found"] and r["right_object"] and r["depth_pct"] <= TARGETS["depth_pct"]
+            and r["lateral_pct"] <= TARGETS["lateral_pct"] and r["size_pct"] <= TARGETS["size_pct"])
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE")
+    ap.add_argument("--scale", type=float, default=1.0, help="resize the pair by this factor (default 1)")
+    ap.add_argument("--size-mm", metavar="LO,HI", help="size prior: the target's longest side is LO..HI mm "
+                    "(sets alpha_min/alpha_max per photo); default: the default alpha range")
+    ap.add_argument("--seeds", type=int, default=1, help="estimator seeds per case (default 1)")
+    ap.add_argument("--out", default=str(Path(__file__).parent / "out" / "real_pair.json"))
+    a = ap.parse_args(argv)
+    cfg = load_config(None, ["estimator.z_min_mm=500", "estimator.z_max_mm=5000", *a.overrides])
+    load = os.getloadavg()
+    print(f"real stereo pair (Middlebury 2014 Motorcycle, scikit-image), scale {a.scale}; load average {load[0]:.1f} "
+          f"on {os.cpu_count()} cores", flush=True)
+    cases = real_cases(cfg.photo_model, scale=a.scale)
+    size_mm = tuple(float(v) for v in a.size_mm.split(",")) if a.size_mm else None
+    rows = []
+    for case in cases:
+        for seed in range(a.seeds):
+            r = run_case(case, size_prior(case, cfg, size_mm), seed)
+            r["seed"] = seed
+            rows.append(r)
+            print(f"  {r['target']:<7} {r['variant']:<7} seed {seed}: {'found' if r['found'] else 'not found':<9} "
+                  f"{'right object' if r['right_object'] else 'WRONG OBJECT':<12} depth {r['depth_pct']:6.1f} % "
+                  f"lateral {r['lateral_pct']:6.1f} % size {r['size_pct']:6.1f} % f {r['fitness'] or 0:.3f} "
+                  f"(truth {r['fitness_truth']:.3f}, null median {r['null_median']:.3f} p99 {r['null_p99']:.3f}) "
+                  f"{r['seconds']:.2f} s", flush=True)
+    print()
+    hdr = (f"{'target':<7} {'variant':<7} {'found':>5} {'right':>5} {'depth %':>8} {'lat. %':>7} {'size %':>7} "
+           f"{'fitness':>7} {'truth f':>7} {'null p99':>8} {'s wall':>6} {'s CPU':>6}")
+    print(hdr)
+    for r in rows:
+        print(f"{r['target']:<7} {r['variant']:<7} {'yes' if r['found'] else 'no':>5} {'yes' if r['right_object'] else 'no':>5} "
+              f"{r['depth_pct']:8.1f} {r['lateral_pct']:7.1f} {r['size_pct']:7.1f} {r['fitness'] or 0:7.3f} "
+              f"{r['fitness_truth']:7.3f} {r['null_p99']:8.3f} {r['seconds']:6.2f} {r['cpu_seconds']:6.2f}")
+    n = len(rows)
+    summary = {"cases": n, "found": sum(r["found"] for r in rows), "right_object": sum(r["right_object"] for r in rows),
+               "all_targets_met": sum(ok(r) for r in rows),
+               "depth_pct_median": float(np.median([r["depth_pct"] for r in rows])),
+               "lateral_pct_median": float(np.median([r["lateral_pct"] for r in rows])),
+               "size_pct_median": float(np.median([r["size_pct"] for r in rows]))}
+    print(f"\nfound {summary['found']}/{n}, right object {summary['right_object']}/{n}, every target met "
+          f"{summary['all_targets_met']}/{n}; medians: depth {summary['depth_pct_median']:.1f} %, lateral "
+          f"{summary['lateral_pct_median']:.1f} %, size {summary['size_pct_median']:.1f} % (targets: depth <= 5 %, "
+          f"lateral <= 5 %, size <= 15 %)")
+
+    def finite(o):
+        if isinstance(o, dict):
+            return {k: finite(v) for k, v in o.items()}
+        if isinstance(o, list):
+            return [finite(v) for v in o]
+        if isinstance(o, float) and not math.isfinite(o):
+            return None
+        return o
+    out = {"benchmark": "real_pair", "machine": {"cpus": os.cpu_count(), "load_average": load},
+           "scale": a.scale, "overrides": a.overrides, "size_prior_mm": size_mm, "targets": TARGETS, "summary": summary, "rows": rows,
+           "python": sys.version.split()[0]}
+    write_text_atomic(a.out, json.dumps(finite(out), indent=1))
+    print(f"wrote {a.out}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
