@@ -49,6 +49,7 @@ from photoservo.sim.renderer import (
     match_individuals,
     perturb_rig,
     pixel_rays,
+    scene_truth,
     synthetic_rig,
 )
 
@@ -746,14 +747,8 @@ def random_scene(seed: int, params: SynthParams, photo_params: PhotoModelParams,
     scene = dataclasses.replace(scene, coverage=(cov_l[0], cov_r[0]))
     foam_cover = 0.0 if empty else float(np.clip(1 - cov_l[0].sum() / max(float(cov_l[1].sum()), 1e-6), 0, 1))
     truth = {
-        "found": not empty,
-        "position_mm": None if empty else [float(v) for v in position],
-        "rotation": None if empty else [[float(v) for v in row] for row in R],
-        "alpha_px_per_mm": None if empty else float(alpha),
-        "size_mm": None if empty else [float(model_B.size_px[0] / alpha), float(model_B.size_px[1] / alpha)],
-        "fitness": None, "generations": None, "seconds": None,
+        **scene_truth(empty, R, position, alpha, model_B),
         "distance_mm": float(T_lm[2, 3]),
-        "tilt_deg": float(np.degrees(np.arccos(np.clip(R[2, 2], -1, 1)))),
         "same_photo": not other_photo,
         "creature_size_mm": [float(wA / alpha_A), float(hA / alpha_A)],
         "calibration_error": calib,

@@ -725,6 +725,22 @@ def _camera_pose(rng: np.random.Generator, rig: Rig, corners_model: np.ndarray, 
     return None
 
 
+def scene_truth(empty: bool, R: np.ndarray, position: np.ndarray, alpha: float, model: PhotoModel) -> dict:
+    """A scene's ground truth in the estimate-JSON shape of DESIGN.md for the estimator's
+    photo-model `model` at pose (R, position mm, model in the true left camera frame) and ratio
+    alpha (px/mm), plus tilt_deg (angle of the model normal from the optical axis); the pose keys
+    are None for empty water."""
+    return {
+        "found": not empty,
+        "position_mm": None if empty else [float(v) for v in position],
+        "rotation": None if empty else [[float(v) for v in row] for row in R],
+        "alpha_px_per_mm": None if empty else float(alpha),
+        "size_mm": None if empty else [float(model.size_px[0] / alpha), float(model.size_px[1] / alpha)],
+        "fitness": None, "generations": None, "seconds": None,
+        "tilt_deg": float(np.degrees(np.arccos(np.clip(R[2, 2], -1, 1)))),
+    }
+
+
 def match_individuals(model_A: PhotoModel, model_B: PhotoModel, alpha_A: float) -> tuple[float, np.ndarray]:
     """Ground truth for another individual's photo (`random_scene`'s other-photo case): the
     photo-model B of the estimator's photo laid onto creature A (photo-model A at alpha_A px/mm)
@@ -902,14 +918,8 @@ def random_scene(seed: int, params: SynthParams, photo_params, kind: str = "squi
     alpha, origin_mm = (alpha_A, np.zeros(3)) if same else match_individuals(model_A, model_B, alpha_A)
     position = R @ origin_mm + T_left_model[:3, 3]
     truth = {
-        "found": not empty,
-        "position_mm": None if empty else [float(v) for v in position],
-        "rotation": None if empty else [[float(v) for v in row] for row in R],
-        "alpha_px_per_mm": None if empty else float(alpha),
-        "size_mm": None if empty else [float(model_B.size_px[0] / alpha), float(model_B.size_px[1] / alpha)],
-        "fitness": None, "generations": None, "seconds": None,
+        **scene_truth(empty, R, position, alpha, model_B),
         "distance_mm": float(T_left_model[2, 3]),
-        "tilt_deg": float(np.degrees(np.arccos(np.clip(R[2, 2], -1, 1)))),
         "same_photo": bool(same),
         "creature_size_mm": [float(wA / alpha_A), float(hA / alpha_A)],
         "calibration_error": calib,
