@@ -123,6 +123,24 @@ def ok(r: dict) -> bool:
             and r["lateral_pct"] <= TARGETS["lateral_pct"] and r["size_pct"] <= TARGETS["size_pct"])
 
 
+def print_tables(rows: list[dict]) -> None:
+    """The per-case table and the window table."""
+    print()
+    hdr = (f"{'target':<7} {'variant':<7} {'found':>5} {'right':>5} {'depth %':>8} {'lat. %':>7} {'size %':>7} "
+           f"{'fitness':>7} {'truth f':>7} {'null p99':>8} {'s wall':>6} {'s CPU':>6}")
+    print(hdr)
+    for r in rows:
+        print(f"{r['target']:<7} {r['variant']:<7} {'yes' if r['found'] else 'no':>5} {'yes' if r['right_object'] else 'no':>5} "
+              f"{r['depth_pct']:8.1f} {r['lateral_pct']:7.1f} {r['size_pct']:7.1f} {r['fitness'] or 0:7.3f} "
+              f"{r['fitness_truth']:7.3f} {r['null_p99']:8.3f} {r['seconds']:6.2f} {r['cpu_seconds']:6.2f}")
+    print(f"\nthe GA alone in a window around the truth (position +-10 % of depth, tilt +-30 deg, alpha x(1 +- 0.5)):")
+    print(f"{'target':<7} {'variant':<7} {'right':>5} {'depth %':>8} {'lat. %':>7} {'size %':>7} {'fitness':>7} {'truth f':>7}")
+    for r in rows:
+        print(f"{r['target']:<7} {r['variant']:<7} {'yes' if r['window_right_object'] else 'no':>5} "
+              f"{r['window_depth_pct']:8.1f} {r['window_lateral_pct']:7.1f} {r['window_size_pct']:7.1f} "
+              f"{r['window_fitness']:7.3f} {r['fitness_truth']:7.3f}")
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE")
@@ -149,20 +167,7 @@ def main(argv: list[str] | None = None) -> int:
                   f"lateral {r['lateral_pct']:6.1f} % size {r['size_pct']:6.1f} % f {r['fitness'] or 0:.3f} "
                   f"(truth {r['fitness_truth']:.3f}, null median {r['null_median']:.3f} p99 {r['null_p99']:.3f}) "
                   f"{r['seconds']:.2f} s", flush=True)
-    print()
-    hdr = (f"{'target':<7} {'variant':<7} {'found':>5} {'right':>5} {'depth %':>8} {'lat. %':>7} {'size %':>7} "
-           f"{'fitness':>7} {'truth f':>7} {'null p99':>8} {'s wall':>6} {'s CPU':>6}")
-    print(hdr)
-    for r in rows:
-        print(f"{r['target']:<7} {r['variant']:<7} {'yes' if r['found'] else 'no':>5} {'yes' if r['right_object'] else 'no':>5} "
-              f"{r['depth_pct']:8.1f} {r['lateral_pct']:7.1f} {r['size_pct']:7.1f} {r['fitness'] or 0:7.3f} "
-              f"{r['fitness_truth']:7.3f} {r['null_p99']:8.3f} {r['seconds']:6.2f} {r['cpu_seconds']:6.2f}")
-    print(f"\nthe GA alone in a window around the truth (position +-10 % of depth, tilt +-30 deg, alpha x(1 +- 0.5)):")
-    print(f"{'target':<7} {'variant':<7} {'right':>5} {'depth %':>8} {'lat. %':>7} {'size %':>7} {'fitness':>7} {'truth f':>7}")
-    for r in rows:
-        print(f"{r['target']:<7} {r['variant']:<7} {'yes' if r['window_right_object'] else 'no':>5} "
-              f"{r['window_depth_pct']:8.1f} {r['window_lateral_pct']:7.1f} {r['window_size_pct']:7.1f} "
-              f"{r['window_fitness']:7.3f} {r['fitness_truth']:7.3f}")
+    print_tables(rows)
     n = len(rows)
     summary = {"cases": n, "found": int(sum(r["found"] for r in rows)),
                "right_object": int(sum(r["right_object"] for r in rows)), "all_targets_met": int(sum(ok(r) for r in rows)),
