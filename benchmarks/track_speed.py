@@ -46,7 +46,7 @@ def prerendered(cfg, n_frames: int, record: bool) -> dict:
         T[:3, 3] += sim.scene.motion.v * t  # cameras following the drift
         left, right = sim.scene.render(T, t, T, t + cfg.sim.lr_skew_s)
         frames.append(Frame(k, t, t + cfg.sim.lr_skew_s, t, left, right, T))
-    tracker = Tracker(sim.scene.model, sim.rig, cfg.tracker, cfg.ga, cfg.estimator, cfg.fitness, 0)
+    tracker = Tracker.from_config(sim.scene.model, sim.rig, cfg, seed=0)
     sc = Scores()
     with tempfile.TemporaryDirectory() as d:
         rec = Recorder.open(Path(d) / "b.rrd", "bench", mode=cfg.recording.mode) if record else None

@@ -50,8 +50,7 @@ def _frames(cfg, s, t, empty=False):
 
 def test_tracker_follows_loses_after_n_misses_and_reacquires(sim):
     cfg, s = sim
-    tr = Tracker(s.scene.model, s.rig, cfg.tracker, cfg.ga, cfg.estimator, cfg.fitness, seed=1)
-    tr.use_time_budget = False
+    tr = Tracker.from_config(s.scene.model, s.rig, cfg, seed=1, time_budget=False)
     truth = s.scene.motion.pose(0.0)[:3, 3]
     statuses = []
     for k in range(4):
@@ -68,3 +67,13 @@ def test_tracker_follows_loses_after_n_misses_and_reacquires(sim):
     assert tk.status == "tracking" and tr.acquisitions == 2
     assert np.linalg.norm(tk.T_base_model[:3, 3] - truth) < 15.0
     assert math.isfinite(tk.fitness)
+
+
+def test_max_generations_caps_a_tracking_frame(sim):
+    """Replay of a real-time run passes each frame's recorded generation count."""
+    cfg, s = sim
+    tr = Tracker.from_config(s.scene.model, s.rig, cfg, seed=1, time_budget=False)
+    tr.update(*_frames(cfg, s, 0.0), 0.0, max_generations=3)  # acquisition: the cap does not apply
+    assert tr.search is not None
+    assert tr.update(*_frames(cfg, s, 1 / 30), 1 / 30, max_generations=3).generations == 3
+    assert tr.update(*_frames(cfg, s, 2 / 30), 2 / 30).generations == cfg.tracker.generations_per_frame

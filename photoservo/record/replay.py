@@ -252,9 +252,7 @@ def replay(setup: ReplaySetup, out: str | Path | None = None, *, view: bool = Fa
     cfg, rec = setup.cfg, setup.recording
     rig = setup.rig
     T_fl, centre = rig.T_flange_left(), S.left_centre(rig)
-    tracker = Tracker(setup.model, rig, cfg.tracker, cfg.ga, cfg.estimator, cfg.fitness, setup.seed)
-    tracker.use_time_budget = False
-    base_p = cfg.tracker
+    tracker = Tracker.from_config(setup.model, rig, cfg, seed=setup.seed, time_budget=False)
     rec_gens = {e.frame: e.generations for e in rec.estimates}
     ctrl = S.Controller(cfg.servo, Motion(cfg.motion, pa10.load_limits()), T_fl, centre)
     truth = {tr.frame: tr for tr in rec.truth}
@@ -285,11 +283,10 @@ def replay(setup: ReplaySetup, out: str | Path | None = None, *, view: bool = Fa
                 fr, m = pending
                 t_l, t_r = m.capture_times or (m.t, m.t)
                 n_rec = rec_gens.get(fr.index)
-                capped = (setup.recorded_generations and tracker.search is not None and n_rec is not None
-                          and 1 <= n_rec < base_p.generations_per_frame)
-                tracker.p = dataclasses.replace(base_p, generations_per_frame=n_rec) if capped else base_p
+                capped = (setup.recorded_generations and n_rec is not None
+                          and 1 <= n_rec < cfg.tracker.generations_per_frame)   # (acquiring frames ignore it)
                 sfr = S.Frame(fr.index, t_l, t_r, t_l + latency, fr.left, fr.right, m.T_base_left)
-                track = S._vision_step(sfr, tracker, cfg, sc, recorder, None)
+                track = S._vision_step(sfr, tracker, cfg, sc, recorder, None, n_rec if capped else None)
                 tr = truth.get(fr.index)
                 if tr is not None:
                     recorder.log_truth(fr.index, t_l, tr.T_base_target,

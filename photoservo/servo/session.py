@@ -268,8 +268,7 @@ def run_lockstep(cfg: Config, duration_s: float, *, collect: bool = False, no_mo
     if not no_motion:
         arm.enable()
     ctrl = Controller(cfg.servo, Motion(cfg.motion, sim.limits), T_fl, centre, collect=collect)
-    tracker = Tracker(scene.model, rig, cfg.tracker, cfg.ga, cfg.estimator, cfg.fitness, seed)
-    tracker.use_time_budget = False  # generations, not wall time, decide: deterministic
+    tracker = Tracker.from_config(scene.model, rig, cfg, seed=seed, time_budget=False)  # deterministic
     sc = Scores()
     dt = 1.0 / cfg.motion.rate_hz
     frame_dt = 1.0 / cfg.sim.camera_fps
@@ -328,12 +327,13 @@ def run_lockstep(cfg: Config, duration_s: float, *, collect: bool = False, no_mo
     return sc
 
 
-def _vision_step(fr: Frame, tracker: Tracker, cfg: Config, sc: Scores, recorder, scene: SimScene | None) -> Track:
-    """One frame through the tracker, timed and recorded."""
+def _vision_step(fr: Frame, tracker: Tracker, cfg: Config, sc: Scores, recorder, scene: SimScene | None,
+                 max_generations: int | None = None) -> Track:
+    """One frame through the tracker, timed and recorded (`max_generations`: Tracker.update)."""
     c0 = time.perf_counter()
     hue = stereo_hue(fr.left, fr.right, cfg.fitness)
     c1 = time.perf_counter()
-    track = tracker.update(hue, fr.left, fr.right, fr.T_base_left, fr.t_left)
+    track = tracker.update(hue, fr.left, fr.right, fr.T_base_left, fr.t_left, max_generations)
     c2 = time.perf_counter()
     sc.time("hue", 1e3 * (c1 - c0))
     sc.time("ga", 1e3 * (c2 - c1))
@@ -620,7 +620,7 @@ def run_realtime(cfg: Config, duration_s: float, *, port: str, cameras, model, r
     each track over. Stopping (duration, Ctrl-C, an error here or a fault there) ends with the
     arm stopped and the servo off. `scene` (simulation) scores hold accuracy against the truth."""
     T_fl = rig.T_flange_left()
-    tracker = Tracker(model, rig, cfg.tracker, cfg.ga, cfg.estimator, cfg.fitness, seed)
+    tracker = Tracker.from_config(model, rig, cfg, seed=seed)
     sc = Scores()
     t0 = time.monotonic() if t0 is None else t0
     stop = stop_event or threading.Event()

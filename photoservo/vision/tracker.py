@@ -23,7 +23,7 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass
-from typing import Literal
+from typing import Literal, Protocol
 
 import numpy as np
 
@@ -101,11 +101,23 @@ def _inv(T: np.ndarray) -> np.ndarray:
     return Ti
 
 
+class TrackerConfig(Protocol):
+    """The sections of the application config (photoservo.config.Config) a Tracker reads; a
+    Protocol so that vision/ does not import the application's config (and through it servo/)."""
+
+    tracker: TrackerParams
+    ga: GAParams
+    estimator: EstimatorParams
+    fitness: FitnessParams
+
+
 class Tracker:
-    """One persistent GA following one target through a stream of stereo frames."""
+    """One persistent GA following one target through a stream of stereo frames. Build it with
+    `Tracker.from_config`."""
 
     def __init__(self, model: PhotoModel, rig: Rig, params: TrackerParams, ga_params: GAParams,
-                 est_params: EstimatorParams, fit_params: FitnessParams, seed: int = 0) -> None:
+                 est_params: EstimatorParams, fit_params: FitnessParams, seed: int = 0, *,
+                 time_budget: bool = True) -> None:
         self.model, self.rig, self.p = model, rig, params
         self.ga_params, self.est_params, self.fit_params = ga_params, est_params, fit_params
         self.ss = np.random.SeedSequence(seed)
@@ -121,7 +133,16 @@ class Tracker:
         self.t_last: float | None = None
         self.T_base_left_last: np.ndarray | None = None
         self.acquisitions = 0
-        self.use_time_budget = True  # False: always run generations_per_frame (deterministic)
+        self.time_budget = time_budget  # False: always run generations_per_frame (deterministic)
+
+    @classmethod
+    def from_config(cls, model: PhotoModel, rig: Rig, cfg: TrackerConfig, *, seed: int = 0,
+                    time_budget: bool = True) -> "Tracker":
+        """A tracker for `model` seen through `rig`, with the [tracker], [ga], [estimator] and
+        [fitness] sections of `cfg`. `time_budget=False`: every tracking frame runs
+        generations_per_frame generations whatever the wall time (lockstep runs and replay:
+        deterministic); True: a frame stops at [tracker] time_budget_ms (real time)."""
+        return cls(model, rig, cfg.tracker, cfg.ga, cfg.estimator, cfg.fitness, seed, time_budget=time_budget)
 
     # ------------------------------------------------------------------ prediction
 
@@ -137,8 +158,10 @@ class Tracker:
     # ------------------------------------------------------------------ one frame
 
     def update(self, frame: StereoHue, left_bgr: np.ndarray, right_bgr: np.ndarray,
-               T_base_left: np.ndarray, t: float) -> Track:
-        """Process one stereo frame captured at time t with the left camera at T_base_left."""
+               T_base_left: np.ndarray, t: float, max_generations: int | None = None) -> Track:
+        """Process one stereo frame captured at time t with the left camera at T_base_left.
+        `max_generations`: run at most this many GA generations on a tracking frame instead of
+        [tracker] generations_per_frame (replay of a real-time run: its recorded counts)."""
         t0 = time.perf_counter()
         self.frames += 1
         T_base_left = np.asarray(T_base_left, dtype=float)
@@ -147,7 +170,8 @@ class Tracker:
             cand = self._acquire(frame, left_bgr, right_bgr, T_base_left)
             generations = 0 if cand is None else cand[4]
         else:
-            cand = self._track_step(frame, T_base_left, T_left_base, t)
+            cand = self._track_step(frame, T_base_left, T_left_base, t,
+                                    self.p.generations_per_frame if max_generations is None else max_generations)
             generations = cand[4] if cand is not None else 0
         self.T_base_left_last = T_base_left
         measured = None
@@ -264,7 +288,8 @@ class Tracker:
             g[ok] = s.space.encode(R2[ok], t2[ok], alpha[ok])
         s.ga.set_genes(g)
 
-    def _track_step(self, frame: StereoHue, T_base_left: np.ndarray, T_left_base: np.ndarray, t: float):
+    def _track_step(self, frame: StereoHue, T_base_left: np.ndarray, T_left_base: np.ndarray, t: float,
+                    max_generations: int):
         s = self.search
         if self.T_base_left_last is not None:
             self._rebase(T_left_base @ self.T_base_left_last)
@@ -281,10 +306,10 @@ class Tracker:
                 s.seed(T_lm[:3, :3], T_lm[:3, 3], np.array([self.alpha]))
         t_end = time.perf_counter() + self.p.time_budget_ms * 1e-3
         n = 0
-        while n < self.p.generations_per_frame:
+        while n < max_generations:
             s.step(1)
             n += 1
-            if self.use_time_budget and time.perf_counter() >= t_end:
+            if self.time_budget and time.perf_counter() >= t_end:
                 break
         if plane:
             g, f = s.ga.best()
