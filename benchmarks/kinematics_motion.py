@@ -31,8 +31,8 @@ from photoservo.robot.pa10 import (
     ik,
     jacobian,
     load_limits,
-    pose_error,
 )
+from photoservo.geometry import pose_error
 from photoservo.servo.motion import Motion, MotionParams
 from photoservo.tomlconf import build_dataclass, configs_dir, read_toml
 

@@ -1,4 +1,9 @@
-"""Orientation of the flat photo-model as heading and tilt (the GA's three orientation genes).
+"""The one home for the maths of frames: 4x4 pose builders T_a_b, rotations about an axis,
+rotation log / angle / mean, the pose error of the servo law and IK, and the orientation of the
+flat photo-model as heading and tilt (the GA's three orientation genes).
+
+Poses are 4x4 homogeneous transforms named by their frames, T_a_b with X_a = T_a_b · X_b
+(millimetres); rotations are 3x3 matrices, angles in radians unless a name says _deg.
 
 A pose is "model in left-camera frame" (DESIGN.md): X_left = R · X_model + t. The model is flat
 (z_model = 0); its normal is R[:, 2]. We write
@@ -16,6 +21,9 @@ observable for a flat target, heading strongly: the two errors are reported sepa
 """
 
 from __future__ import annotations
+
+import math
+from collections.abc import Sequence
 
 import numpy as np
 
@@ -89,9 +97,88 @@ def heading_tilt_error(R_true: np.ndarray, R_est: np.ndarray) -> tuple[float, fl
     return float(np.degrees(abs(psi))), float(np.degrees(tilt))
 
 
+# ----------------------------------------------------------------------------- poses
+
+
 def make_pose(R: np.ndarray, t: np.ndarray) -> np.ndarray:
-    """4x4 homogeneous transform T with X_a = R · X_b + t, i.e. T_a_b from R (3x3) and t (3,)."""
+    """4x4 homogeneous transform T with X_a = R · X_b + t, i.e. T_a_b from R (3x3) and t (3,),
+    mm. Also attaches a tool (T_flange_tool) or a hand-eye (T_flange_camera) to the flange.
+
+    >>> make_pose(np.eye(3), [1.0, 2.0, 3.0]) @ [0.0, 0.0, 0.0, 1.0]
+    array([1., 2., 3., 1.])
+    """
     T = np.eye(4)
     T[:3, :3] = R
     T[:3, 3] = np.asarray(t, dtype=np.float64).ravel()
     return T
+
+
+def invert_pose(T: np.ndarray) -> np.ndarray:
+    """T_b_a from T_a_b for a rigid transform: [R^T, -R^T t].
+
+    >>> T = make_pose(axis_rotation(2, 0.3), [10.0, -5.0, 2.0])
+    >>> bool(np.allclose(invert_pose(T) @ T, np.eye(4)))
+    True
+    """
+    R, t = T[:3, :3], T[:3, 3]
+    return make_pose(R.T, -R.T @ t)
+
+
+def pose_error(T_target: np.ndarray, T: np.ndarray) -> np.ndarray:
+    """Pose error e = [p* - p (mm); w] (6,), both in the frame the poses are given in (the arm's
+    BASE frame for the servo law and IK), where w is the rotation vector of R* · R^T: the twist
+    that, applied for unit time at T's origin, reaches T*."""
+    e = np.empty(6)
+    e[:3] = T_target[:3, 3] - T[:3, 3]
+    e[3:] = rotation_log(T_target[:3, :3] @ T[:3, :3].T)
+    return e
+
+
+# ----------------------------------------------------------------------------- rotations
+
+
+def axis_rotation(axis: int, angle: float) -> np.ndarray:
+    """Rotation by `angle` (rad, right-hand rule) about coordinate axis 0 (x), 1 (y) or 2 (z).
+
+    >>> np.round(axis_rotation(2, math.pi / 2) @ [1.0, 0.0, 0.0], 12) + 0.0
+    array([0., 1., 0.])
+    """
+    c, s = math.cos(angle), math.sin(angle)
+    i, j = [(1, 2), (2, 0), (0, 1)][axis]
+    R = np.eye(3)
+    R[i, i], R[i, j], R[j, i], R[j, j] = c, -s, s, c
+    return R
+
+
+def rotation_log(R: np.ndarray) -> np.ndarray:
+    """Rotation vector w (axis · angle, rad) with R = exp([w]x), angle in [0, pi].
+
+    >>> bool(np.allclose(rotation_log(axis_rotation(1, 0.5)), [0.0, 0.5, 0.0]))
+    True
+    """
+    c = float(np.clip((np.trace(R) - 1.0) / 2.0, -1.0, 1.0))
+    angle = math.acos(c)
+    vee = np.array([R[2, 1] - R[1, 2], R[0, 2] - R[2, 0], R[1, 0] - R[0, 1]])
+    if angle < 1e-6:
+        return 0.5 * vee
+    if angle < math.pi - 1e-4:
+        return angle / (2.0 * math.sin(angle)) * vee
+    # near pi: the axis from the symmetric part, (R + R^T)/2 = cos(angle) I + (1 - cos(angle)) n n^T
+    B = ((R + R.T) / 2.0 - c * np.eye(3)) / (1.0 - c)
+    k = int(np.argmax(np.diag(B)))
+    n = B[:, k] / math.sqrt(B[k, k])
+    if n @ vee < 0:
+        n = -n
+    return angle * n / np.linalg.norm(n)
+
+
+def rotation_angle_deg(R: np.ndarray) -> float:
+    """Angle of a rotation matrix (deg), 0..180."""
+    return math.degrees(math.acos(float(np.clip((np.trace(R) - 1) / 2, -1.0, 1.0))))
+
+
+def mean_rotation(Rs: Sequence[np.ndarray]) -> np.ndarray:
+    """Chordal L2 mean of rotations (the rotation nearest to their sum)."""
+    U, _, Vt = np.linalg.svd(np.sum(Rs, axis=0))
+    D = np.diag([1.0, 1.0, np.sign(np.linalg.det(U @ Vt))])
+    return U @ D @ Vt

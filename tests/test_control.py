@@ -4,7 +4,7 @@ import cv2
 import numpy as np
 import pytest
 
-from photoservo.robot.pa10 import make_pose, pose_error
+from photoservo.geometry import make_pose, pose_error
 from photoservo.servo.control import (
     ServoParams,
     camera_twist,

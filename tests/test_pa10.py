@@ -22,12 +22,10 @@ from photoservo.robot.pa10 import (
     ik,
     jacobian,
     load_limits,
-    make_pose,
     nearest_equivalent,
-    pose_error,
-    rotation_log,
     tool_offset,
 )
+from photoservo.geometry import make_pose, pose_error, rotation_log
 
 LIM = load_limits()
 

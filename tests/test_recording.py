@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 
 from photoservo.errors import InputError
-from photoservo.robot.pa10 import make_pose
+from photoservo.geometry import make_pose
 from photoservo.record.recorder import (
     PREVIEW_WARNING,
     Recorder,

@@ -186,7 +186,7 @@ def test_bad_recordings_are_one_line_errors(recorded: Path, tmp_path: Path, caps
 
 
 def test_hold_error_row_against_hand_computed_numbers(tmp_path: Path):
-    from photoservo.robot.pa10 import make_pose
+    from photoservo.geometry import make_pose
     from photoservo.record.reader import run_metrics
     from photoservo.vision.rig import Rig, default_rig, dump_rig
 

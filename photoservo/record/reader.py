@@ -38,7 +38,7 @@ import pyarrow.compute as pc
 from rerun.chunk import RrdReader
 
 from photoservo.errors import InputError
-from photoservo.robot.pa10 import make_pose
+from photoservo.geometry import make_pose
 from photoservo.record import recorder as R_
 
 _SEG = re.compile(r"^(?P<stem>.*)\.seg(?P<n>\d{4,})(?P<partial>\.partial)?$")

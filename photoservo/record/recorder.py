@@ -112,7 +112,8 @@ import cv2
 import numpy as np
 
 from photoservo.errors import InputError
-from photoservo.robot.pa10 import fk_frames, make_pose
+from photoservo.geometry import make_pose
+from photoservo.robot.pa10 import JOINT_NAMES, fk_frames
 
 
 class _LazyModule:
@@ -151,7 +152,6 @@ SPAWN_WAIT_S = 5.0     # longest wait for a spawned viewer to listen
 SERIES_FLUSH_S = 0.5   # queued time series (plots, timings, arm) are written this often
 ARM_BATCH = 750        # ...or, when no frames come (move), at this many queued samples
 ARM_DRAW_PERIOD_S = 0.1   # the arm is redrawn at most this often
-JOINT_NAMES = ("S1", "S2", "S3", "E1", "E2", "W1", "W2")
 PREVIEW_WARNING = ("PREVIEW RECORDING: frames are JPEG (lossy, hue changes). This recording "
                    "is for viewing only and CANNOT be replayed.")
 

@@ -19,7 +19,8 @@ base +x).
 Frames and units: base frame z up, millimetres and radians. Poses are 4x4 homogeneous transforms
 named by their frames, T_a_b with X_a = T_a_b · X_b. The flange frame is frame 7 (the tool
 plate); a tool or the rig's left camera is attached with T_flange_tool / T_flange_camera
-(`Rig.T_flange_left()` gives the latter from the rig's [hand_eye] table).
+(`Rig.T_flange_left()` gives the latter from the rig's [hand_eye] table); pose builders and the
+pose error live in photoservo/geometry.py.
 
 Limits (joint ranges, speed, acceleration, jerk) live in configs/pa10.toml, in degrees there and
 in radians in `PA10Limits`.
@@ -44,6 +45,7 @@ from pathlib import Path
 import numpy as np
 
 from photoservo.errors import InputError
+from photoservo.geometry import make_pose, pose_error
 from photoservo.tomlconf import build_dataclass, configs_dir, read_toml
 
 N_JOINTS = 7
@@ -167,15 +169,6 @@ def load_limits(path: str | os.PathLike | None = None) -> PA10Limits:
 # forward kinematics and Jacobian
 
 
-def make_pose(R: np.ndarray, p) -> np.ndarray:
-    """4x4 homogeneous transform from a 3x3 rotation and a translation (mm). Use it to attach a
-    tool (T_flange_tool) or a hand-eye (T_flange_camera: X_flange = R · X_cam + t) to the flange."""
-    T = np.eye(4)
-    T[:3, :3] = R
-    T[:3, 3] = p
-    return T
-
-
 def tool_offset(z_mm: float) -> np.ndarray:
     """T_flange_tool for a straight tool of length z_mm along the flange z axis (a net, a gripper)."""
     return make_pose(np.eye(3), (0.0, 0.0, z_mm))
@@ -243,33 +236,6 @@ def jacobian(q, T_flange_tool: np.ndarray | None = None) -> np.ndarray:
 
 # --------------------------------------------------------------------------------------------
 # differential inverse kinematics
-
-
-def rotation_log(R: np.ndarray) -> np.ndarray:
-    """Rotation vector w (axis · angle, rad) with R = exp([w]x), angle in [0, pi]."""
-    c = float(np.clip((np.trace(R) - 1.0) / 2.0, -1.0, 1.0))
-    angle = math.acos(c)
-    vee = np.array([R[2, 1] - R[1, 2], R[0, 2] - R[2, 0], R[1, 0] - R[0, 1]])
-    if angle < 1e-6:
-        return 0.5 * vee
-    if angle < math.pi - 1e-4:
-        return angle / (2.0 * math.sin(angle)) * vee
-    # near pi: the axis from the symmetric part, (R + R^T)/2 = cos(angle) I + (1 - cos(angle)) n n^T
-    B = ((R + R.T) / 2.0 - c * np.eye(3)) / (1.0 - c)
-    k = int(np.argmax(np.diag(B)))
-    n = B[:, k] / math.sqrt(B[k, k])
-    if n @ vee < 0:
-        n = -n
-    return angle * n / np.linalg.norm(n)
-
-
-def pose_error(T_target: np.ndarray, T: np.ndarray) -> np.ndarray:
-    """Pose error e = [p* - p (mm); w] (6,), both in the BASE frame, where w is the rotation
-    vector of R* · R^T: the twist that, applied for unit time at T's origin, reaches T*."""
-    e = np.empty(6)
-    e[:3] = T_target[:3, 3] - T[:3, 3]
-    e[3:] = rotation_log(T_target[:3, :3] @ T[:3, :3].T)
-    return e
 
 
 def dls_step(q, twist, damping: float = 0.05, *, T_flange_tool: np.ndarray | None = None,

@@ -15,7 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from photoservo.errors import InputError
-from photoservo.robot.pa10 import make_pose
+from photoservo.geometry import make_pose
 
 Z_UP = np.array([0.0, 0.0, 1.0])
 
@@ -102,7 +102,7 @@ def yaw_error_deg(T_base_cam: np.ndarray, T_base_cam_des: np.ndarray) -> float:
 
 def camera_twist(e: np.ndarray, v_target: np.ndarray, params: ServoParams) -> tuple[np.ndarray, np.ndarray]:
     """PBVS law: v = k_p · e_p + f · v_target, ω = k_R · e_R, each clipped to its cap, where
-    e = [e_p; e_R] = `pa10.pose_error(T_base_cam*, T_base_cam)` (mm, rad; base frame: the twist
+    e = [e_p; e_R] = `geometry.pose_error(T_base_cam*, T_base_cam)` (mm, rad; base frame: the twist
     that reaches the desired pose in unit time) and v_target is the tracker's target velocity
     in the base frame (mm/s). Returns (v mm/s, ω rad/s)."""
     v = params.k_position * e[:3] + params.feed_forward * np.asarray(v_target, dtype=float)

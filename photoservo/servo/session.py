@@ -30,7 +30,7 @@ from typing import Callable, Literal
 import numpy as np
 
 from photoservo.robot import pa10
-from photoservo.robot.pa10 import make_pose, pose_error
+from photoservo.geometry import make_pose, pose_error
 from photoservo.robot import protocol as P
 from photoservo.robot.clock import Rate, set_realtime
 from photoservo.config import Config

@@ -41,6 +41,7 @@ import cv2
 import numpy as np
 
 from photoservo.errors import InputError
+from photoservo.geometry import axis_rotation
 from photoservo.geometry import make_pose as make_transform  # one builder for vision/
 from photoservo.vision.photo_model import PhotoModel, hue_distance
 from photoservo.vision.rig import Camera, Rig
@@ -119,15 +120,10 @@ class CameraEffects:
     jpeg_quality: int = 0
 
 
-def rot_z(angle: float) -> np.ndarray:
-    c, s = math.cos(angle), math.sin(angle)
-    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
-
-
 def lying_on_water(position_world: np.ndarray, heading: float) -> np.ndarray:
     """T_world_model of a creature lying face-up on the water at `position_world` (mm), its model
     x axis at `heading` (rad, about world z from world x). The model z axis points down."""
-    R = rot_z(heading) @ np.diag([1.0, -1.0, -1.0])
+    R = axis_rotation(2, heading) @ np.diag([1.0, -1.0, -1.0])
     return make_transform(R, np.asarray(position_world, float))
 
 
@@ -544,8 +540,11 @@ def render_stereo(scene: Scene, rig: Rig, T_world_left: np.ndarray, t: float = 0
 class StereoRenderer:
     """`render_stereo` for many frames of one rig: the per-pixel rays are computed once.
 
-    >>> r = StereoRenderer(synthetic_rig())           # doctest: +SKIP
-    >>> left, right = r.render(scene, T_world_left, t)  # doctest: +SKIP
+    >>> r = StereoRenderer(synthetic_rig())
+    >>> T_world_left = make_transform(np.diag([1.0, -1.0, -1.0]), [0.0, 0.0, 1000.0])  # 1 m up, looking down
+    >>> left, right = r.render(Scene(water=calm_water(0)), T_world_left, 0.0, water_stride=4)
+    >>> left.shape, right.dtype
+    ((480, 640, 3), dtype('uint8'))
     """
 
     def __init__(self, rig: Rig) -> None:

@@ -12,11 +12,11 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-import cv2
 import numpy as np
 
 from photoservo.errors import InputError
 from photoservo.fileio import read_image
+from photoservo.geometry import axis_rotation
 from photoservo.robot import protocol as P
 from photoservo.sim.emulator import BridgeModel, EmulatorParams
 from photoservo.robot.link import LinkError
@@ -73,12 +73,6 @@ class SimParams:
             raise InputError(f"config key '{where}.specimen' must be squid, crab or fish, got {self.specimen!r}")
 
 
-def _rot(axis: int, angle: float) -> np.ndarray:
-    v = np.zeros(3)
-    v[axis] = angle
-    return cv2.Rodrigues(v)[0]
-
-
 @dataclass(frozen=True)
 class TargetMotion:
     """Closed-form target motion on the water: constant drift plus sinusoidal heave, roll and
@@ -111,8 +105,8 @@ class TargetMotion:
         """T_base_model(t): the target's model frame in the base frame at time t (s)."""
         w_h, w_r, w_p = (2 * math.pi / self.heave_period, 2 * math.pi / self.roll_period,
                          2 * math.pi / self.pitch_period)
-        R = (_rot(2, self.heading) @ _rot(0, self.roll * math.sin(w_r * t))
-             @ _rot(1, self.pitch * math.sin(w_p * t + 1.0)) @ FACE_UP)
+        R = (axis_rotation(2, self.heading) @ axis_rotation(0, self.roll * math.sin(w_r * t))
+             @ axis_rotation(1, self.pitch * math.sin(w_p * t + 1.0)) @ FACE_UP)
         T = np.eye(4)
         T[:3, :3] = R
         T[:3, 3] = self.p0 + self.v * t + np.array([0.0, 0.0, self.heave * math.sin(w_h * t)])

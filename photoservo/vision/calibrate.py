@@ -19,6 +19,7 @@ import numpy as np
 
 from photoservo.errors import InputError
 from photoservo.geometry import make_pose as make_T  # one builder for the whole of vision/
+from photoservo.geometry import mean_rotation, rotation_angle_deg  # noqa: F401 (callers import them from here)
 from photoservo.vision.board import (
     Board,
     BoardDetection,
@@ -48,22 +49,6 @@ HAND_EYE_METHODS = {
 # ----------------------------------------------------------------------------- small pose helpers
 
 
-def inv_T(T: np.ndarray) -> np.ndarray:
-    """Inverse of a rigid 4x4 transform."""
-    R, t = T[:3, :3], T[:3, 3]
-    return make_T(R.T, -R.T @ t)
-
-
-def rotation_angle_deg(R: np.ndarray) -> float:
-    """Angle of a rotation matrix (deg)."""
-    return math.degrees(math.acos(float(np.clip((np.trace(R) - 1) / 2, -1.0, 1.0))))
-
-
-def mean_rotation(Rs: Sequence[np.ndarray]) -> np.ndarray:
-    """Chordal L2 mean of rotations (the rotation nearest to their sum)."""
-    U, _, Vt = np.linalg.svd(np.sum(Rs, axis=0))
-    D = np.diag([1.0, 1.0, np.sign(np.linalg.det(U @ Vt))])
-    return U @ D @ Vt
 
 
 # ----------------------------------------------------------------------------- stereo

@@ -21,6 +21,7 @@ import cv2
 import numpy as np
 
 from photoservo.errors import InputError
+from photoservo.geometry import axis_rotation
 from photoservo.vision.fitness import FitnessParams, StereoHue, fitness
 from photoservo.vision.photo_model import PhotoModel
 from photoservo.vision.rig import Rig
@@ -54,12 +55,6 @@ class ScanSlice:
         return float(self.offsets[j]), float(self.alphas[i]), float(self.fitness[i, j])
 
 
-def _rot(axis: int, angle: float) -> np.ndarray:
-    v = np.zeros(3)
-    v[axis] = angle
-    return cv2.Rodrigues(v)[0]
-
-
 def slice_poses(axis: str, R0: np.ndarray, t0: np.ndarray, offsets: np.ndarray
                 ) -> tuple[np.ndarray, np.ndarray]:
     """The poses (R (n,3,3), t (n,3)) of one scan row: t0 moved along a left-camera axis (mm), or
@@ -70,7 +65,7 @@ def slice_poses(axis: str, R0: np.ndarray, t0: np.ndarray, offsets: np.ndarray
         t = np.repeat(t0[None], n, axis=0)
         t[:, k] += offsets
         return np.repeat(R0[None], n, axis=0), t
-    R = np.stack([R0 @ _rot(k, np.radians(d)) for d in offsets])
+    R = np.stack([R0 @ axis_rotation(k, np.radians(d)) for d in offsets])
     return R, np.repeat(t0[None], n, axis=0)
 
 

@@ -32,7 +32,7 @@ from photoservo.vision.estimator import EstimatorParams, PoseSearch, estimate
 from photoservo.vision.fitness import FitnessParams, StereoHue
 from photoservo.vision.ga import GAParams
 from photoservo.vision.photo_model import PhotoModel
-from photoservo.geometry import make_pose
+from photoservo.geometry import invert_pose, make_pose
 from photoservo.vision.rig import Rig
 
 Status = Literal["acquiring", "tracking", "coasting", "lost"]
@@ -92,13 +92,6 @@ class Track:
     alpha_measured: float | None
     generations: int
     seconds: float
-
-
-def _inv(T: np.ndarray) -> np.ndarray:
-    Ti = np.eye(4)
-    Ti[:3, :3] = T[:3, :3].T
-    Ti[:3, 3] = -T[:3, :3].T @ T[:3, 3]
-    return Ti
 
 
 class TrackerConfig(Protocol):
@@ -165,7 +158,7 @@ class Tracker:
         t0 = time.perf_counter()
         self.frames += 1
         T_base_left = np.asarray(T_base_left, dtype=float)
-        T_left_base = _inv(T_base_left)
+        T_left_base = invert_pose(T_base_left)
         if self.search is None:
             cand = self._acquire(frame, left_bgr, right_bgr, T_base_left)
             generations = 0 if cand is None else cand[4]
