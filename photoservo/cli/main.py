@@ -25,6 +25,7 @@ VERBS: dict[str, tuple[str, str]] = {
     "move": ("photoservo.cli.move", "move the arm to joint angles (deg) or home through the bridge, jerk-limited"),
     "track": ("photoservo.cli.track", "track a floating creature and servo the arm over it (main job)"),
     "replay": ("photoservo.cli.replay", "re-run a recording's tracker and control law with a changed config; compare"),
+    "tune": ("photoservo.cli.tune", "tune config keys automatically: an Optuna study on simulated worlds and recordings"),
 }
 
 
