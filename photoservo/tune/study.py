@@ -15,6 +15,8 @@ first trial of a new study, so the study's best is never worse than the start on
 
 from __future__ import annotations
 
+import os
+import socket
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -24,6 +26,7 @@ from photoservo.errors import InputError
 from photoservo.tune.space import Param
 
 COUNTED = ("COMPLETE", "RUNNING")   # trial states that use the budget (a FAILed trial is re-run)
+WORKER = f"{socket.gethostname()}:{os.getpid()}"   # who ran a trial (the trial's user attr "worker")
 
 
 @dataclass(frozen=True)
@@ -171,6 +174,7 @@ def run_worker(study: Any, spec: StudySpec, measure: Callable[[dict[str, Any]], 
             study.stop()
             raise optuna.TrialPruned("the study's trial budget is used")
         params = {p.key: suggest(trial, p) for p in spec.space}
+        trial.set_user_attr("worker", WORKER)
         t0 = time.perf_counter()
         scores = measure(params)
         trial.set_user_attr("scores", scores)

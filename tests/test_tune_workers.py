@@ -1,0 +1,129 @@
+"""`photoservo tune` workers (issue 14), as real processes: two workers share a study on a real
+PostgreSQL server started here (no trial lost or run twice, both work); SIGTERM stops after the
+running trial, exit 143, and the same command continues the study to its budget."""
+
+from __future__ import annotations
+
+import glob
+import os
+import shutil
+import signal
+import socket
+import subprocess
+import sys
+import tempfile
+import time
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+
+REPO = Path(__file__).resolve().parents[1]
+# tiny worlds: 1 s at 5 fps, hold scored after 0.5 s
+TINY = ["--space", "servo.k_position=0.5:4:log", "--duration", "1.0", "--settle", "0.5",
+        "--set", "sim.camera_fps=5"]
+
+
+def _tune(*argv: str, **kw) -> subprocess.Popen:
+    env = {**os.environ, "PYTHONPATH": str(REPO) + os.pathsep + os.environ.get("PYTHONPATH", "")}
+    return subprocess.Popen([sys.executable, "-m", "photoservo.cli", "tune", *argv], env=env, text=True,
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, **kw)
+
+
+def _trials(storage: str, study: str) -> list:
+    import optuna
+
+    optuna.logging.set_verbosity(optuna.logging.WARNING)
+    try:
+        return optuna.load_study(study_name=study, storage=storage).get_trials(deepcopy=False)
+    except KeyError:   # not created yet
+        return []
+
+
+def _pg_bin() -> Path | None:
+    """The PostgreSQL server binaries: on PATH, or Debian's /usr/lib/postgresql/<v>/bin."""
+    found = shutil.which("initdb")
+    if found:
+        return Path(found).resolve().parent
+    dirs = sorted(glob.glob("/usr/lib/postgresql/*/bin/initdb"))
+    return Path(dirs[-1]).parent if dirs else None
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+@pytest.fixture(scope="module")
+def postgres() -> Iterator[str]:
+    """A real PostgreSQL server in a temporary cluster (trust auth, TCP on 127.0.0.1), run as the
+    unprivileged 'postgres' user when we are root (the server refuses root). CI must have it
+    (.ci/run installs Debian's postgresql): there the test fails instead of skipping."""
+    pg = _pg_bin()
+    if pg is None:
+        if os.environ.get("CI"):
+            pytest.fail("PostgreSQL server binaries (initdb) not found: .ci/run should install postgresql")
+        pytest.skip("PostgreSQL server binaries (initdb) not installed")
+    as_user: list[str] = []
+    data = Path(tempfile.mkdtemp(prefix="photoservo-pg-"))
+    if os.geteuid() == 0:
+        import pwd
+
+        user = pwd.getpwnam("postgres")
+        os.chown(data, user.pw_uid, user.pw_gid)
+        as_user = ["runuser", "-u", "postgres", "--"]
+    port = _free_port()
+    run = lambda *cmd: subprocess.run([*as_user, *cmd], check=True, capture_output=True, text=True)  # noqa: E731
+    try:
+        run(str(pg / "initdb"), "-D", str(data / "db"), "-A", "trust", "-U", "postgres", "--no-sync")
+        run(str(pg / "pg_ctl"), "-D", str(data / "db"), "-w", "-l", str(data / "server.log"), "-o",
+            f"-p {port} -k {data} -c listen_addresses=127.0.0.1 -c fsync=off", "start")
+        yield f"postgresql://postgres@127.0.0.1:{port}/postgres"
+    finally:
+        subprocess.run([*as_user, str(pg / "pg_ctl"), "-D", str(data / "db"), "-m", "fast", "-w", "stop"],
+                       capture_output=True)
+        shutil.rmtree(data, ignore_errors=True)
+
+
+def test_two_workers_share_a_postgresql_study(postgres: str):
+    """Two worker processes (as two cluster nodes would run it, each its own --seed) share one
+    study on the server: 4 trials complete, numbered 0..3, none FAILed, PRUNED or run twice,
+    and both workers ran trials."""
+    common = [*TINY, "--worlds", "1", "--trials", "4", "--storage", postgres, "--study", "pg"]
+    first = _tune(*common, "--seed", "0")
+    time.sleep(3.0)   # the first node creates the study; the second joins it
+    second = _tune(*common, "--seed", "1")
+    outs = [p.communicate(timeout=600) for p in (first, second)]
+    assert first.returncode == 0 and second.returncode == 0, [o[1][-2000:] for o in outs]
+    trials = _trials(postgres, "pg")
+    assert [t.number for t in trials] == [0, 1, 2, 3]
+    assert [t.state.name for t in trials] == ["COMPLETE"] * 4
+    assert len({t.user_attrs["worker"] for t in trials}) == 2
+    assert trials[0].user_attrs.get("start") and len({t.params["servo.k_position"] for t in trials}) == 4
+    assert all(t.user_attrs["scores"]["hold"] > 0 for t in trials)
+
+
+def test_sigterm_stops_after_the_running_trial_and_the_study_resumes(tmp_path: Path):
+    db = str(tmp_path / "t.db")
+    url = f"sqlite:///{db}"
+    argv = [*TINY, "--worlds", "1", "--trials", "3", "--storage", db, "--study", "s"]
+    p = _tune(*argv)
+    deadline = time.monotonic() + 300
+    while time.monotonic() < deadline and p.poll() is None:
+        if os.path.exists(db) and any(t.state.name == "COMPLETE" for t in _trials(url, "s")):
+            break
+        time.sleep(0.3)
+    p.send_signal(signal.SIGTERM)
+    _, err = p.communicate(timeout=300)
+    assert p.returncode == 128 + signal.SIGTERM, err[-2000:]
+    assert "stopped by SIGTERM after the running trials" in err
+    kept = _trials(url, "s")
+    assert {t.state.name for t in kept} == {"COMPLETE"} and 1 <= len(kept) < 3   # none left running
+    again = _tune(*argv)
+    out, err = again.communicate(timeout=600)
+    assert again.returncode == 0, err[-2000:]
+    trials = _trials(url, "s")
+    assert [t.state.name for t in trials] == ["COMPLETE"] * 3
+    assert [t.params for t in trials[: len(kept)]] == [t.params for t in kept]   # the kept ones, not re-run
+    assert f"{len(kept)}/3 trials done" in err
