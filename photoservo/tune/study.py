@@ -60,8 +60,13 @@ class StudySpec:
 
 
 def storage_url(text: str) -> str:
-    """--storage: a URL as is; a plain file path becomes an SQLite URL."""
-    return text if "://" in text else f"sqlite:///{text}"
+    """--storage: a plain file path becomes an SQLite URL; postgresql:// goes through psycopg
+    (version 3, the driver we install), whichever driver SQLAlchemy's default is."""
+    if "://" not in text:
+        return f"sqlite:///{text}"
+    if text.startswith(("postgresql://", "postgres://")):
+        return "postgresql+psycopg://" + text.split("://", 1)[1]
+    return text
 
 
 def quiet_optuna() -> None:
