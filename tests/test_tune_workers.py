@@ -19,8 +19,8 @@ from pathlib import Path
 import pytest
 
 REPO = Path(__file__).resolve().parents[1]
-# tiny worlds: 1 s at 5 fps, hold scored after 0.5 s
-TINY = ["--space", "servo.k_position=0.5:4:log", "--duration", "1.0", "--settle", "0.5",
+# tiny worlds: 0.6 s at 5 fps (3 frames), hold scored after 0.3 s
+TINY = ["--space", "servo.k_position=0.5:4:log", "--duration", "0.6", "--settle", "0.3",
         "--set", "sim.camera_fps=5"]
 
 
