@@ -57,7 +57,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--storage", default="tune.db", metavar="URL",
                    help="SQLite file or database URL, e.g. postgresql://user@host/db (default tune.db)")
     p.add_argument("--jobs", type=int, default=1, metavar="N", help="worker processes on this machine")
-    p.add_argument("--seed", type=int, default=0, help="sampler seed; tuned worlds are seeds SEED+1..SEED+N")
+    p.add_argument("--seed", type=int, default=0,
+                   help="the sampler's seed (give each node of a cluster its own); worlds are seeds 1..N, "
+                        "held-out ones 1000..")
     p.add_argument("--duration", type=float, default=6.0, metavar="S", help="length of a generated world (s)")
     p.add_argument("--settle", type=float, default=3.0, metavar="S", help="hold error is scored from here (s)")
     p.add_argument("--holdout-worlds", type=int, default=None, metavar="M",
@@ -99,7 +101,7 @@ def _sources(args: argparse.Namespace, need_track: bool) -> tuple[Any, Any]:
         recs, held_recs = recs[: len(recs) - k], recs[len(recs) - k:]
     common = dict(config_path=args.config, base=tuple(args.overrides), duration_s=args.duration,
                   settle_s=args.settle, need_track=need_track)
-    tuned = Sources(world_seeds=tuple(range(args.seed + 1, args.seed + 1 + args.worlds)),
+    tuned = Sources(world_seeds=tuple(range(1, 1 + args.worlds)),
                     world_from=tuple(args.world_from), recordings=tuple(recs), **common)
     n_held = args.holdout_worlds if args.holdout_worlds is not None else max(1, args.worlds)
     if not tuned.closed_loop:
@@ -108,7 +110,7 @@ def _sources(args: argparse.Namespace, need_track: bool) -> tuple[Any, Any]:
         raise InputError(f"--holdout-worlds {n_held}: must be >= 0")
     held = None
     if n_held or held_recs:
-        held = Sources(world_seeds=tuple(range(HELDOUT_SEED0 + args.seed, HELDOUT_SEED0 + args.seed + n_held)),
+        held = Sources(world_seeds=tuple(range(HELDOUT_SEED0, HELDOUT_SEED0 + n_held)),
                        recordings=tuple(held_recs), **common)
     return tuned, held
 
@@ -162,7 +164,8 @@ def run(args: argparse.Namespace) -> int:
     names, weights = _objectives(args)
     tuned, held = _sources(args, need_track="track" in names)
     check_objectives(names, tuned)
-    spec = StudySpec(args.study, storage_url(args.storage), tuple(space), names, weights, args.trials, args.seed)
+    spec = StudySpec(args.study, storage_url(args.storage), tuple(space), names, weights, args.trials, args.seed,
+                     runs=tuned.describe() + " | " + " ".join(args.overrides))
     study = open_study(spec, _start_params(args, space))
     print(f"study '{spec.name}' in {_redact(spec.storage)}: {len(completed(study))}/{spec.trials} trials done\n"
           f"space: {'; '.join(p.describe() for p in space)}\n"
@@ -214,10 +217,16 @@ def _write_best(args: argparse.Namespace, spec: Any, study: Any, held: Any) -> N
     if held is None:
         print("held-out: none (give --holdout-recordings, or 2+ --recordings)", file=sys.stderr)
     else:
-        print(f"re-measuring the defaults and trial #{best.number} on held-out runs ...", file=sys.stderr)
-        a, b = measure(held, {}).scores, measure(held, params).scores
-        table = heldout_table(a, b, held.describe())
+        print(f"re-measuring the start and trial #{best.number} on held-out runs ...", file=sys.stderr)
+        a = measure(held, {})
+        b = a if best.user_attrs.get("start") else measure(held, params)   # the start won: the same runs
+        table = heldout_table(a, b, held.describe(), spec.objectives[0])
         print(table)
+        worse = [n for n in spec.objectives if b.scores.get(n, math.nan) > a.scores.get(n, math.nan)]
+        if worse:
+            print(f"warning: on the held-out runs the tuned configuration is worse than the start in "
+                  f"{', '.join(worse)}: it may fit the tuned runs only (tune on more or longer runs)",
+                  file=sys.stderr)
         header += ["#"] + [f"# {line}" for line in table.splitlines()]
     write_text_atomic(args.out, overlay_toml(params, "\n".join(header)))
     print(f"best configuration: {args.out}", file=sys.stderr)

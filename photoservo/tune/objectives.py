@@ -40,7 +40,7 @@ OBJECTIVES: dict[str, str] = {
     "lost": "lost frame share",
     "cpu": "tracker ms per frame",
 }
-HELDOUT_SEED0 = 1000   # held-out worlds are seeds 1000, 1001, ... (tuned ones start at --seed + 1)
+HELDOUT_SEED0 = 1000   # held-out worlds are seeds 1000, 1001, ... (tuned ones are 1..N)
 
 
 def world_overrides(seed: int) -> list[str]:

@@ -6,6 +6,7 @@ front)."""
 from __future__ import annotations
 
 import math
+import warnings
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
@@ -18,7 +19,7 @@ def _num(v: Any, nd: int = 3) -> str:
     if isinstance(v, float):
         if math.isnan(v):
             return "-"
-        return f"{v:.{nd}g}" if abs(v) < 1e4 else f"{v:.0f}"
+        return f"{v:.{nd}g}" if abs(v) < 10 ** nd else f"{v:.0f}"
     return str(v)
 
 
@@ -30,7 +31,8 @@ def _table(head: Sequence[str], rows: Sequence[Sequence[str]]) -> str:
 
 def best_table(trials: Sequence[Any], spec: StudySpec) -> str:
     """Trial number, objective value(s), every measured score and the parameters."""
-    names = [n for n in OBJECTIVES if any(n in t.user_attrs.get("scores", {}) for t in trials)]
+    names = [n for n in OBJECTIVES
+             if any(not math.isnan(t.user_attrs.get("scores", {}).get(n, float("nan"))) for t in trials)]
     keys = [p.key for p in spec.space]
     value_head = ["value"] if not spec.pareto else []
     head = ["trial", *value_head, *names, *keys]
@@ -44,17 +46,24 @@ def best_table(trials: Sequence[Any], spec: StudySpec) -> str:
     return _table(head, rows)
 
 
-def heldout_table(defaults: dict[str, float], tuned: dict[str, float], what: str) -> str:
+def heldout_table(start: Any, tuned: Any, what: str, first: str) -> str:
     """The scores of the start (the base config: defaults <- --config <- --set) and of the tuned
-    overlay on held-out runs, side by side."""
+    overlay on held-out runs (two objectives.Measurement), side by side: every score's mean,
+    then the first objective run by run."""
     rows = []
     for n, label in OBJECTIVES.items():
-        a, b = defaults.get(n, float("nan")), tuned.get(n, float("nan"))
-        if math.isnan(a) and math.isnan(b):
-            continue
-        ratio = b / a if a and not (math.isnan(a) or math.isnan(b)) else float("nan")
-        rows.append([label, _num(a), _num(b), _num(ratio, 2)])
+        a, b = start.scores.get(n, float("nan")), tuned.scores.get(n, float("nan"))
+        if not (math.isnan(a) and math.isnan(b)):
+            rows.append([label, _num(a), _num(b), _ratio(a, b)])
+    for (name, ra), (_, rb) in zip(start.runs, tuned.runs):
+        a, b = ra.get(first, float("nan")), rb.get(first, float("nan"))
+        if not (math.isnan(a) and math.isnan(b)):
+            rows.append([f"  {first}: {name}", _num(a), _num(b), _ratio(a, b)])
     return f"held-out: {what}\n" + _table(["", "start", "tuned", "tuned/start"], rows)
+
+
+def _ratio(a: float, b: float) -> str:
+    return _num(b / a, 2) if a and not (math.isnan(a) or math.isnan(b)) else "-"
 
 
 def progress_line(done: int, total: int, number: int, scores: dict[str, float], failed: bool,
@@ -93,7 +102,9 @@ def write_plots(study: Any, spec: StudySpec, folder: str | Path) -> list[Path]:
         views.append(("pareto.png", lambda: ovm.plot_pareto_front(study, target_names=names)))
     written = []
     for name, make in views:
-        ax = make()
+        with warnings.catch_warnings():   # the importance evaluator's note that lower is better: it is
+            warnings.simplefilter("ignore", UserWarning)
+            ax = make()
         fig = (ax if hasattr(ax, "savefig") else ax.figure if hasattr(ax, "figure") else ax.flat[0].figure)
         fig.set_size_inches(8, 5)
         fig.tight_layout()

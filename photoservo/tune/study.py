@@ -41,6 +41,7 @@ class StudySpec:
     weights: tuple[float, ...] | None = None
     trials: int = 20
     seed: int = 0
+    runs: str = ""      # what a trial runs (the sources and the base config): part of the signature
 
     @property
     def pareto(self) -> bool:
@@ -56,7 +57,7 @@ class StudySpec:
         """The space and objectives as text: a resumed study must have the same."""
         obj = ",".join(self.objectives) + ("" if self.weights is None else
                                            " weights " + ",".join(f"{w:g}" for w in self.weights))
-        return "; ".join(p.describe() for p in self.space) + " | " + obj
+        return "; ".join(p.describe() for p in self.space) + " | " + obj + (" | " + self.runs if self.runs else "")
 
 
 def storage_url(text: str) -> str:
@@ -129,7 +130,7 @@ def open_study(spec: StudySpec, base_params: dict[str, Any] | None = None, worke
         if base_params and not study.trials:
             study.enqueue_trial(base_params, user_attrs={"start": True}, skip_if_exists=True)
     elif sig != spec.signature():
-        raise InputError(f"--study {spec.name}: exists in the storage with another space or objectives "
+        raise InputError(f"--study {spec.name}: exists in the storage with another space, objectives or runs "
                          f"({sig}); give a new --study name")
     return study
 
