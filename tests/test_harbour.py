@@ -10,6 +10,7 @@ import json
 import cv2
 import numpy as np
 import pytest
+from test_synthetic import half_rig
 
 from photoservo.cli.main import main
 from photoservo.config import load_config
@@ -19,6 +20,7 @@ from photoservo.vision.photo_model import HUE_BINS, build_photo_model, hue_image
 from photoservo.vision.rig import project_points
 
 CFG = load_config()
+RIG = half_rig()  # 320 x 240: a quarter of the rendering time
 
 
 def truth_pixels(sc, model, uv: np.ndarray, right: bool, R=None, t=None) -> np.ndarray:
@@ -46,9 +48,9 @@ def on_creature(sc, px: np.ndarray, right: bool) -> np.ndarray:
 
 
 def test_same_seed_same_scene_other_seed_other_scene():
-    a = random_scene(3, CFG.synthetic, CFG.photo_model, kind="crab", distractor=True)
-    b = random_scene(3, CFG.synthetic, CFG.photo_model, kind="crab", distractor=True)
-    c = random_scene(4, CFG.synthetic, CFG.photo_model, kind="crab", distractor=True)
+    a = random_scene(3, CFG.synthetic, CFG.photo_model, kind="crab", distractor=True, rig=RIG)
+    b = random_scene(3, CFG.synthetic, CFG.photo_model, kind="crab", distractor=True, rig=RIG)
+    c = random_scene(4, CFG.synthetic, CFG.photo_model, kind="crab", distractor=True, rig=RIG)
     assert np.array_equal(a.left, b.left) and np.array_equal(a.right, b.right)
     assert np.array_equal(a.photo, b.photo)
     assert a.truth == b.truth
@@ -58,7 +60,7 @@ def test_same_seed_same_scene_other_seed_other_scene():
 
 @pytest.mark.parametrize("kind,other", [("squid", False), ("fish", True)])
 def test_truth_lands_on_the_creature_in_both_images(kind, other):
-    sc = random_scene(11, CFG.synthetic, CFG.photo_model, kind=kind, other_photo=other)
+    sc = random_scene(11, CFG.synthetic, CFG.photo_model, kind=kind, other_photo=other, rig=RIG)
     model = build_photo_model(sc.photo, CFG.photo_model)
     tr = sc.truth
     assert tr["same_photo"] is (not other)
@@ -96,8 +98,8 @@ def target_hue_pieces(sc, model) -> np.ndarray:
 
 
 def test_foam_band_splits_the_creature_hue_region_in_two():
-    split = random_scene(21, CFG.synthetic, CFG.photo_model, kind="fish", foam_split=True)
-    plain = random_scene(21, CFG.synthetic, CFG.photo_model, kind="fish")
+    split = random_scene(21, CFG.synthetic, CFG.photo_model, kind="fish", foam_split=True, rig=RIG)
+    plain = random_scene(21, CFG.synthetic, CFG.photo_model, kind="fish", rig=RIG)
     model = build_photo_model(split.photo, CFG.photo_model)
     assert split.truth["foam_split"] and not plain.truth["foam_split"]
     pieces = target_hue_pieces(split, model)
@@ -108,7 +110,7 @@ def test_foam_band_splits_the_creature_hue_region_in_two():
 
 
 def test_many_hued_fish_carries_the_water_hue():
-    sc = random_scene(5, CFG.synthetic, CFG.photo_model, kind="fish", many_hued=True)
+    sc = random_scene(5, CFG.synthetic, CFG.photo_model, kind="fish", many_hued=True, rig=RIG)
     model = build_photo_model(sc.photo, CFG.photo_model)
     hue = hue_image(sc.left, CFG.fitness.min_saturation, CFG.fitness.min_value)
     water = hue[sc.scene.coverage[0] < 0.01]
@@ -120,7 +122,7 @@ def test_many_hued_fish_carries_the_water_hue():
 
 
 def test_empty_water_has_no_target():
-    sc = random_scene(6, CFG.synthetic, CFG.photo_model, kind="squid", empty=True)
+    sc = random_scene(6, CFG.synthetic, CFG.photo_model, kind="squid", empty=True, rig=RIG)
     assert sc.truth["found"] is False and sc.truth["position_mm"] is None
     assert sc.scene.coverage[0].max() == 0.0
 
