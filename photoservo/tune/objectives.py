@@ -101,7 +101,8 @@ def session_scores(summary: dict) -> dict[str, float]:
     runs), else the median `track --json` prints."""
     frames = summary["frames"]
     t = summary.get("timings_ms_mean") or summary.get("timings_ms_median") or {}
-    return {"hold": float(summary["rms_position_error_mm"]),
+    hold = summary.get("hold_error_rms_mm", summary.get("rms_position_error_mm"))   # issue 11 renames it
+    return {"hold": float(hold),
             "lost": (frames - round(summary["found_ratio"] * frames)) / frames if frames else float("nan"),
             "cpu": float(t.get("hue", float("nan")) + t.get("ga", float("nan")))}
 
@@ -117,7 +118,11 @@ def recording_scores(metrics: dict[str, float]) -> dict[str, float]:
 def _lockstep(cfg: Config, duration_s: float, seed: int, settle_s: float, need_track: bool) -> dict[str, float]:
     """One closed-loop lockstep run -> scores (recorded to a temporary file for track error)."""
     from photoservo.record.reader import read_recording, run_metrics
-    from photoservo.servo.session import build_sim, run_lockstep
+
+    try:   # issue 11 moves the simulator harness from servo/session.py to sim/run.py
+        from photoservo.sim.run import build_sim, run_lockstep
+    except ImportError:
+        from photoservo.servo.session import build_sim, run_lockstep
 
     sim = build_sim(cfg)
     if not need_track:
