@@ -275,3 +275,15 @@ def test_shipped_photos_are_the_code_s_drawings():
         for other in (False, True):
             shipped = cv2.imread(str(folder / f"{kind}{'_other' if other else ''}.png"))
             assert shipped is not None and np.array_equal(shipped, specimen(kind, 0, other)), kind
+
+
+def test_target_touching_the_photo_edge():
+    """A target whose thin leg reaches the photo's bottom-right corner (a tight crop) still gives
+    a model: grid points past the edge are off the target, not an index error."""
+    photo = np.full((120, 200, 3), 235, np.uint8)
+    cv2.ellipse(photo, (105, 55), (55, 32), 0, 0, 360, (40, 60, 220), -1)  # grid overshoots x = 199
+    cv2.line(photo, (150, 75), (199, 119), (40, 60, 220), 3)  # the leg runs into the corner pixel
+    model = build_photo_model(photo, load_config().photo_model)
+    assert len(model.inner_uv) > 100
+    pts = model.inner_uv + np.array(model.origin_px)
+    assert pts[:, 0].max() <= 199.5 and pts[:, 1].max() <= 119.5
