@@ -385,7 +385,9 @@ def fault_run(seconds: float, drop: float, corrupt: float) -> dict:
     lim = load_limits()
     assert lim is not None
     with Bridge("--drop", str(drop), "--corrupt", str(corrupt), "--seed", "7") as br:
-        lk = Link(br.path, dataclasses.replace(LINK, ack_timeout_s=2.0, silence_timeout_s=1.0))
+        # the link-quality gate wide open: this run measures what the bridge does with bad frames
+        lk = Link(br.path, dataclasses.replace(LINK, ack_timeout_s=2.0, silence_timeout_s=1.0, max_bad_frames_per_s=1000.0,
+                                               max_refused_per_s=1000.0, max_watchdog_per_s=1000.0))
         for _ in range(10):
             try:
                 lk.open()

@@ -9,8 +9,10 @@ Recorded to Rerun (logs/<time>_move.rrd by default): joint state, setpoints, eve
 
 A target outside the limits or the keep-out is refused with a one-line error (exit 2) before
 anything moves. Ctrl-C makes a controlled stop, disables the servo and closes the link (exit
-130). A bridge that goes silent or away ends the move with a one-line error (exit 1); the
-bridge's watchdog has already stopped the arm.
+130). A bridge that goes silent or away ends the move with a one-line error (exit 3); the
+bridge's watchdog has already stopped the arm. A noisy line (the link-quality gate, [link]
+max_*_per_s) ends it with a controlled stop, servo off and a one-line error with the counts
+(exit 3); the progress line shows the link quality while the arm moves.
 
 Example:
     photoservo pa10-sim --link /tmp/pa10 &
@@ -29,7 +31,7 @@ import numpy as np
 
 from photoservo.errors import InputError
 from photoservo.robot.clock import Rate
-from photoservo.robot.link import Link, LinkError
+from photoservo.robot.link import Link, LinkError, LinkQuality, LinkQualityError
 from photoservo.robot.pa10 import HOME_Q, JOINT_NAMES, load_limits
 from photoservo.cli.config import add_config_options
 from photoservo.cli.pa10_sim import realtime_or_input_error
@@ -60,18 +62,21 @@ class _Progress:
     def __init__(self, q0: np.ndarray, target: np.ndarray, width: int = 30) -> None:
         self.q0, self.target, self.width = q0, target, width
         self.d0 = float(np.max(np.abs(target - q0))) or 1.0
-        self.shown = -1
+        self.shown: tuple[int, str] | None = None
+        self.length = 0  # of the line last written (a shorter one is padded over it)
         self.t0 = time.monotonic()
 
-    def update(self, q: np.ndarray, final: bool = False) -> None:
+    def update(self, q: np.ndarray, quality: LinkQuality, final: bool = False) -> None:
         frac = 1.0 - min(1.0, float(np.max(np.abs(self.target - q))) / self.d0)
         pct = 100 if final else min(99, int(100 * frac))
-        if pct == self.shown:
+        link = quality.text()
+        if (pct, link) == self.shown:
             return
-        self.shown = pct
+        self.shown = (pct, link)
         k = self.width * pct // 100
-        sys.stderr.write(f"\rmove [{'#' * k}{'.' * (self.width - k)}] {pct:3d}% "
-                         f"{time.monotonic() - self.t0:5.1f}s")
+        line = f"move [{'#' * k}{'.' * (self.width - k)}] {pct:3d}% {time.monotonic() - self.t0:5.1f}s {link}"
+        sys.stderr.write("\r" + line.ljust(self.length))
+        self.length = len(line)
         if final:
             sys.stderr.write("\n")
         sys.stderr.flush()
@@ -115,6 +120,9 @@ def run(args: argparse.Namespace) -> int:
     link = Link(args.port, cfg.link, JOINT_NAMES)
     try:
         version = link.open()
+    except LinkQualityError as e:  # a bridge answered through a noisy line: a link failure
+        print(f"photoservo move: error: {e}", file=sys.stderr)
+        return 3
     except LinkError as e:
         raise InputError(f"--port {args.port}: {e}") from None
     rec = None
@@ -129,10 +137,12 @@ def run(args: argparse.Namespace) -> int:
         rec = _open_recorder(args, cfg)
         return _move(link, motion, target, rec, args.timeout)
     except LinkError as e:
-        print(f"photoservo move: error: {e}", file=sys.stderr)
+        stopped = link.safe_stop(timeout=2.0)  # a noisy line still carries STOP and servo off
+        sys.stderr.write("\n" if link.setpoints_sent else "")
+        print(f"photoservo move: error: {e}{' ' + stopped if stopped else ''}", file=sys.stderr)
         if rec is not None:
             rec.event(time.monotonic(), f"link error: {e}", level="ERROR")
-        return 1
+        return 3
     finally:
         link.close()
         if rec is not None:
@@ -164,7 +174,7 @@ def _move(link: Link, motion: Motion, target: np.ndarray, rec, timeout: float) -
                 if rec is not None:
                     rec.event(s.t, sp.reason, level="WARN")
             last_reason = sp.reason
-            bar.update(s.q)
+            bar.update(s.q, link.quality())
             if motion.done:
                 break
             if time.monotonic() > t_end:
@@ -173,7 +183,7 @@ def _move(link: Link, motion: Motion, target: np.ndarray, rec, timeout: float) -
                 link.disable()
                 raise LinkError(f"move not finished after {timeout:g} s (last: {sp.reason or 'moving'}); stopped")
             rate.sleep()
-        bar.update(s.q, final=True)
+        bar.update(s.q, link.quality(), final=True)
         link.disable()
         s = link.wait_until_still()
         err = np.degrees(np.abs(s.q - target))

@@ -11,8 +11,13 @@ A background reader thread decodes every byte the bridge sends and keeps the rec
 setpoints are written with a non-blocking write (a setpoint that finds the line still busy — by
 the baud rate, see `Link` — is dropped and counted: the next one supersedes it). Control messages (enable, stop, tool...) wait
 for their ACK. A bridge that goes silent (no state for `silence_timeout_s`) or away (the port
-errors or closes) makes the next call raise `LinkError` saying what to check. Leaving the `with`
-block stops the arm (controlled stop) and disables the servo if it was on; there is no __del__.
+errors or closes) makes the next call raise `LinkError` saying what to check. A noisy line trips
+the link-quality gate: when bad frames (CRC/COBS/length, either direction), refused setpoints
+(NACK) or bridge watchdog stops pass their configured rate over the last `quality_window_s`,
+`state()` and `send_setpoint()` raise `LinkQualityError` (a LinkError) with the counts, while
+the control messages (stop, servo off) still go out. `quality()` gives the numbers for a status
+line. Leaving the `with` block stops the arm (controlled stop) and disables the servo if it was
+on (`safe_stop`); there is no __del__.
 
 Times are `time.monotonic()` seconds on the host; joints in radians.
 """
@@ -30,11 +35,16 @@ import serial
 
 from photoservo.errors import InputError
 from photoservo.robot import protocol as P
+from photoservo.robot.link_quality import BAD, REFUSED, WATCHDOG, LinkQuality, QualityWindow, report_events
 from photoservo.robot.pa10 import fk
 
 
 class LinkError(ConnectionError):
     """The bridge refused a command, went silent, or went away. The message says what to do."""
+
+
+class LinkQualityError(LinkError):
+    """The link-quality gate tripped: too many bad frames, refused setpoints or watchdog stops."""
 
 
 @dataclass(frozen=True)
@@ -45,14 +55,25 @@ class LinkParams:
     silence_timeout_s: float
     ack_timeout_s: float
     history_s: float
+    quality_window_s: float  # the link-quality gate's window (s)
+    max_bad_frames_per_s: float  # bad frames (both directions) per s over the window that stop the arm
+    max_refused_per_s: float  # setpoints the bridge refused, per s over the window
+    max_watchdog_per_s: float  # bridge watchdog stops, per s over the window
 
     def validate(self, where: str) -> None:
         w = f"{where}." if where else ""
-        if self.baud <= 0:
-            raise InputError(f"config key '{w}baud': {self.baud} must be > 0")
-        for k in ("silence_timeout_s", "ack_timeout_s", "history_s"):
-            if getattr(self, k) <= 0:
-                raise InputError(f"config key '{w}{k}': {getattr(self, k)} must be > 0")
+        if not 0 < self.baud <= 20_000_000:
+            raise InputError(f"config key '{w}baud': {self.baud} must be in 1..20000000")
+        bounds = {"silence_timeout_s": (0.0, 10.0), "ack_timeout_s": (0.0, 10.0), "history_s": (0.0, 60.0),
+                  "quality_window_s": (0.0, 10.0)}
+        for k, (lo, hi) in bounds.items():
+            v = getattr(self, k)
+            if not lo < v <= hi:
+                raise InputError(f"config key '{w}{k}': {v} must be in ({lo:g}, {hi:g}]")
+        for k in ("max_bad_frames_per_s", "max_refused_per_s", "max_watchdog_per_s"):
+            v = getattr(self, k)
+            if not 0.0 <= v <= 1000.0:  # finite: inf would switch the gate off
+                raise InputError(f"config key '{w}{k}': {v} must be in [0, 1000]")
 
 
 @dataclass(frozen=True)
@@ -115,9 +136,11 @@ class Link:
 
     MAX_BACKLOG_FRAMES = 1.5
 
-    def __init__(self, port: str, params: LinkParams, joint_names: tuple[str, ...] | None = None) -> None:
+    def __init__(self, port: str, params: LinkParams, joint_names: tuple[str, ...] | None = None,
+                 simulated: bool = False) -> None:
         self.port = port
         self.params = params
+        self.simulated = simulated  # the bridge is the emulator: errors speak of the simulator
         self.joint_names = joint_names or tuple(f"J{i + 1}" for i in range(P.N_JOINTS))
         self.decoder = P.Decoder()
         self.version: P.VersionInfo | None = None
@@ -134,6 +157,10 @@ class Link:
         self._history: deque[JointState] = deque()
         self._offsets: deque[float] = deque(maxlen=512)
         self._error: LinkError | None = None
+        self._quality = QualityWindow(params.quality_window_s)
+        self._quality_error: LinkQualityError | None = None
+        self._bad_seen = 0  # host decoder errors already counted in _quality
+        self._last_report: P.StateReport | None = None
         self._closing = threading.Event()
         self._reader: threading.Thread | None = None
         self._t_open = 0.0
@@ -157,6 +184,10 @@ class Link:
         self._errors_at_sync = 0
         with self._cond:
             self._error = None
+            self._quality = QualityWindow(self.params.quality_window_s)
+            self._quality_error = None
+            self._bad_seen = 0
+            self._last_report = None
             self._history.clear()
             self._replies.clear()
             self._offsets.clear()
@@ -175,8 +206,12 @@ class Link:
         self._reader.start()
         try:
             reply = self._request(P.Hello(client_id=0x5053), expect=P.VersionInfo)
-        except LinkError:
+        except LinkError as e:
             self.close()
+            q = self.quality()
+            if q.bad_frames:  # something answered, garbled: a noisy line, not a wrong port
+                raise LinkQualityError(f"{e} Meanwhile {q.bad_frames} bad frames arrived: "
+                                       f"{q.advice(0.0, self.simulated)}") from None
             raise
         assert isinstance(reply, P.VersionInfo)
         self.version = reply
@@ -201,17 +236,28 @@ class Link:
 
     def __exit__(self, exc_type, exc, tb) -> None:
         try:
-            if self._servo_requested and self._error is None:
-                try:
-                    self.stop()
-                    self.wait_until_still(timeout=5.0)
-                finally:
-                    self.disable()
-        except LinkError:
-            if exc_type is None:
-                raise
+            why = self.safe_stop()
+            if why and exc_type is None:
+                raise LinkError(why)
         finally:
             self.close()
+
+    def safe_stop(self, timeout: float = 5.0) -> str:
+        """Controlled stop and servo off if the servo was switched on and the bridge still
+        answers (also after the link-quality gate tripped: control messages are retried).
+        Returns "" when done or not needed, else what failed — then the bridge's own setpoint
+        watchdog stops the arm, since no more setpoints come."""
+        if not self._servo_requested or self._error is not None or self._ser is None:
+            return ""
+        try:
+            try:
+                self.stop()
+                self.wait_until_still(timeout=timeout)
+            finally:
+                self.disable()
+        except LinkError:
+            return "The bridge did not confirm the controlled stop; its setpoint watchdog stops the arm."
+        return ""
 
     # ------------------------------------------------------------------ commands
     def enable(self) -> None:
@@ -248,7 +294,7 @@ class Link:
         Raises:
             LinkError: the bridge has gone silent or away.
         """
-        self._check()
+        self._check(quality=True)
         t = time.monotonic() if t_host is None else t_host
         msg = P.JointSetpoint(int(t * 1e6), tuple(np.asarray(q, float).tolist()),
                               tuple(np.asarray(dq, float).tolist()))
@@ -265,8 +311,9 @@ class Link:
 
         Raises:
             LinkError: none received within silence_timeout_s (bridge silent), or the port failed.
+            LinkQualityError: the link-quality gate tripped (see the module docstring).
         """
-        self._check()
+        self._check(quality=True)
         with self._cond:
             if not self._history:
                 raise LinkError(f"no state from the bridge on {self.port} yet")
@@ -349,10 +396,31 @@ class Link:
     def resyncs(self) -> int:
         return self.decoder.resyncs
 
+    def quality(self) -> LinkQuality:
+        """The link-quality numbers now (totals since open, rates over quality_window_s)."""
+        with self._cond:
+            return self._quality.snapshot(time.monotonic())
+
     # ------------------------------------------------------------------ internals
-    def _check(self) -> None:
+    def _check(self, quality: bool = False) -> None:
         with self._cond:
             self._check_locked()
+            if quality:
+                self._check_quality_locked()
+
+    def _check_quality_locked(self) -> None:
+        """The link-quality gate: raise (and latch) LinkQualityError once a rate passes its limit."""
+        if self._quality_error is not None:
+            raise self._quality_error
+        p = self.params
+        q = self._quality.snapshot(time.monotonic())
+        over = q.over(p.max_bad_frames_per_s, p.max_refused_per_s, p.max_watchdog_per_s)
+        if not over:
+            return
+        self._quality_error = LinkQualityError(
+            f"link to the bridge on {self.port} failed the quality gate: {over} in the last {q.window_s:g} s "
+            f"({q.totals()} since the start); controlled stop. {q.advice(p.max_bad_frames_per_s, self.simulated)}")
+        raise self._quality_error
 
     def _check_locked(self) -> None:
         if self._error is not None:
@@ -365,8 +433,17 @@ class Link:
 
     def _silent_error(self) -> LinkError:
         last = self._history[-1].t_rx if self._history else self._t_open
-        return LinkError(f"bridge on {self.port} silent for {time.monotonic() - last:.2f} s "
-                         f"(limit {self.params.silence_timeout_s:.2f} s); the arm stops by itself "
+        what = f"{time.monotonic() - last:.2f} s (limit {self.params.silence_timeout_s:.2f} s)"
+        if self.simulated:
+            return LinkError(f"the simulator's bridge (emulator) on {self.port} sent no state for {what}: "
+                             "it did not get the CPU; the arm stops by itself (watchdog). The machine is "
+                             "too busy: close other programs, or raise [link] silence_timeout_s.")
+        q = self._quality.snapshot(time.monotonic())
+        if q.bad_frames_per_s:  # garbled rather than silent
+            return LinkError(f"bridge on {self.port} sent no valid state for {what}; the arm stops by itself "
+                             f"(watchdog). {q.bad_frames_per_s * q.window_s:.0f} bad frames in the last "
+                             f"{q.window_s:g} s. {q.advice(0.0, False)}")
+        return LinkError(f"bridge on {self.port} silent for {what}; the arm stops by itself "
                          "(watchdog). Check the cable and the bridge power, then reconnect.")
 
     def _next_seq(self) -> int:
@@ -436,9 +513,10 @@ class Link:
     def _fail(self, why: str) -> None:
         with self._cond:
             if self._error is None:
+                advice = ("The simulator ended" if self.simulated else
+                          "Check the cable and the bridge, then reconnect")
                 self._error = LinkError(f"bridge on {self.port} went away: {why}. The arm stops by "
-                                        "itself (watchdog). Check the cable and the bridge, then "
-                                        "reconnect.")
+                                        f"itself (watchdog). {advice}.")
             self._cond.notify_all()
 
     def _clock_offset(self, t_rx: float, t_bridge: float) -> float:
@@ -457,6 +535,7 @@ class Link:
                 s = JointState(m.t_bridge_us * 1e-6 + off, t_rx, np.array(m.q), np.array(m.dq),
                                P.Status(m.status), P.Fault(m.fault) if m.fault in P.Fault._value2member_map_
                                else P.Fault.INTERNAL, m)
+                self._count_report(m, t_rx)
                 if self._history and s.t < self._history[-1].t:
                     self._history.clear()  # bridge clock jumped (restart): start over
                 self._history.append(s)
@@ -467,11 +546,19 @@ class Link:
             elif isinstance(m, (P.Ack, P.Nack)):
                 if isinstance(m, P.Nack):
                     self.nacks.append(m)
-                    self.refused += m.msg_type == P.MsgType.SETPOINT
+                    if m.msg_type == P.MsgType.SETPOINT:
+                        self.refused += 1
+                        self._quality.add(t_rx, REFUSED)
                 self._replies[m.seq] = m
                 if len(self._replies) > 256:
                     self._replies.pop(next(iter(self._replies)))
             self._cond.notify_all()
+
+    def _count_report(self, m: P.StateReport, t_rx: float) -> None:
+        bad, watchdog = report_events(self._last_report, m)
+        self._quality.add(t_rx, BAD, bad)
+        self._quality.add(t_rx, WATCHDOG, watchdog)
+        self._last_report = m
 
     def _read_loop(self) -> None:
         ser = self._ser
@@ -490,3 +577,9 @@ class Link:
             t_rx = time.monotonic()
             for frame in self.decoder.iter_feed(data):
                 self._on_frame(frame, t_rx)
+            if self.decoder.frames:  # bad frames on the host side, once in sync
+                bad = self.crc_errors
+                if bad > self._bad_seen:
+                    with self._cond:
+                        self._quality.add(t_rx, BAD, bad - self._bad_seen)
+                    self._bad_seen = bad

@@ -490,6 +490,12 @@ class Emulator:
         else:
             self._silent.clear()
 
+    def line_faults(self, drop: float, corrupt: float, delay: float = 0.0) -> None:
+        """Change the fault injection of both directions while running (probabilities per byte,
+        as the [emulator] keys): a line that turns noisy mid-move."""
+        for f in (self.rx_faults, self.tx_faults):
+            f.drop, f.corrupt, f.delay = drop, corrupt, delay
+
     def true_state(self) -> TrueState:
         """The simulated arm's joint state now (copies)."""
         with self._lock:
