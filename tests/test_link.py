@@ -371,7 +371,7 @@ def test_model_watchdog_decelerates_within_ddq_max():
 
 
 def test_fault_injector_drops_corrupts_and_delays_in_order():
-    from photoservo.sim.emulator import FaultInjector
+    from photoservo.sim.line import FaultInjector
 
     rng = np.random.default_rng(0)
     data = bytes(range(1, 201))

@@ -58,6 +58,7 @@ def test_gate_trips_on_a_noisy_pty_and_still_stops_the_arm(simulated):
     # raises within 0.5 s, names the counts, and STOP / servo off still get through
     with Emulator(emu_params()) as e, Link(e.path, link_params(gate=True), simulated=simulated) as lk:
         lk.enable()
+        lk.wait_state()
         q0 = np.float32(e.true_state().q).astype(float)
         t_next = time.monotonic()
         for _ in range(100):
@@ -88,6 +89,7 @@ def test_gate_trips_on_a_noisy_pty_and_still_stops_the_arm(simulated):
 def test_gate_quiet_on_a_clean_line():
     with Emulator(emu_params()) as e, Link(e.path, link_params(gate=True)) as lk:
         lk.enable()
+        lk.wait_state()
         q0 = np.float32(e.true_state().q).astype(float)
         t_next = time.monotonic()
         for _ in range(250):

@@ -149,7 +149,7 @@ def test_distractor_in_view_never_draws_the_arm():
 def test_realtime_session_over_a_real_pty_stops_and_disables_the_arm():
     """The control loop in its own process over the emulator's pty; the session ends with the arm
     at rest and the servo off, and the control process ran at its rate."""
-    from photoservo.sim.emulator import Emulator
+    from photoservo.sim.emulator_process import EmulatorProcess
     from photoservo.robot.link import Link
     from photoservo.servo.session import run_sim_realtime
 
@@ -157,18 +157,20 @@ def test_realtime_session_over_a_real_pty_stops_and_disables_the_arm():
     # silence (default 0.25 s) so that the test checks the session's ending, not the machine
     cfg = load_config(overrides=["sim.camera_fps=10.0", "link.silence_timeout_s=1.0"])
     sim = build_sim(cfg)
-    emu = Emulator(cfg.emulator, sim.limits, q0=sim.q0)
+    emu = EmulatorProcess(cfg.emulator, sim.limits, q0=sim.q0)  # as `track --sim` runs it
     path = emu.start()
     try:
         sc = run_sim_realtime(cfg, 5.0, sim, emu)
         assert sc.frames >= 2 and not sc.faults, sc.summary()
         assert len(sc.timings_ms["control_late"]) > 250  # the control process ran at its rate
-        assert emu.model.accepted > 100  # setpoints reached the bridge and were carried out
         with Link(path, cfg.link) as link:
             st = link.wait_state()  # a report sent after the session ended
         assert not st.servo_on and not st.moving  # controlled stop, then servo off
+        assert not emu.true_state().status & P.Status.SERVO_ON  # the published true state agrees
     finally:
         emu.stop()
+    assert emu.summary["accepted"] > 100  # setpoints reached the bridge and were carried out
+    assert emu.error == ""
 
 
 def test_ctrl_c_stops_the_arm_and_leaves_a_verified_recording(tmp_path):

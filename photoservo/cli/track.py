@@ -84,7 +84,8 @@ class _StatusLine:
                 f"fit {(fit if fit is not None and math.isfinite(fit) else float('nan')):.2f} | "
                 f"pos {pos_s} | alpha {d['alpha'] or float('nan'):.2f} | "
                 f"err {err:.0f} mm {d['yaw_deg']:.1f} deg | {d['phase']}"
-                + (f" | stop: {d['stop']}" if d.get("stop") else ""))
+                + (f" | stop: {d['stop']}" if d.get("stop") else "")
+                + (f" | {d['link'].text()}" if d.get("link") else ""))
         if self.tty:
             print("\r" + line[:160].ljust(160), end="", file=sys.stderr, flush=True)
         else:
@@ -163,7 +164,7 @@ def _recording_files(rec) -> str:
 
 
 def _run_sim(args, cfg) -> int:
-    from photoservo.sim.emulator import Emulator
+    from photoservo.sim.emulator_process import EmulatorProcess
     from photoservo.servo.session import build_sim, run_lockstep, run_sim_realtime
 
     if args.lockstep:  # the recorded effective config then says how the run was clocked (replay reads it)
@@ -178,7 +179,7 @@ def _run_sim(args, cfg) -> int:
             sc = run_lockstep(cfg, args.duration, collect=args.collect, no_motion=args.no_motion,
                               recorder=rec, status=status, seed=args.seed, setup=sim)
         else:
-            emu = Emulator(cfg.emulator, sim.limits, q0=sim.q0)
+            emu = EmulatorProcess(cfg.emulator, sim.limits, q0=sim.q0)  # its own process, prioritised
             emu.start()
             try:
                 sc = run_sim_realtime(cfg, args.duration, sim, emu, collect=args.collect, no_motion=args.no_motion,

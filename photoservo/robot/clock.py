@@ -50,3 +50,20 @@ def set_realtime(priority: int) -> None:
     if not 1 <= priority <= 99:
         raise ValueError(f"real-time priority {priority} is outside 1..99")
     os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(priority))
+
+
+def raise_priority(priority: int, nice: int = -10) -> str:
+    """Best effort against a busy machine, for the loops that must hold their period (the
+    control process, the simulator's bridge): SCHED_FIFO `priority` when permitted, else the
+    niceness `nice` when permitted, else unchanged. Threads started afterwards inherit it.
+    Returns what was got, for the session's events: 'SCHED_FIFO 20', 'nice -10' or 'normal'."""
+    try:
+        set_realtime(priority)
+        return f"SCHED_FIFO {priority}"
+    except (OSError, AttributeError):
+        pass
+    try:
+        os.setpriority(os.PRIO_PROCESS, 0, nice)
+        return f"nice {nice}"
+    except (OSError, AttributeError):
+        return "normal"

@@ -7,17 +7,14 @@
         past = link.state_at(t_capture)               # joints where the cameras were then
         link.stop(); link.disable()
 
-A background reader thread decodes every byte the bridge sends and keeps the recent states;
-setpoints are written with a non-blocking write (a setpoint that finds the line still busy — by
-the baud rate, see `Link` — is dropped and counted: the next one supersedes it). Control messages (enable, stop, tool...) wait
-for their ACK. A bridge that goes silent (no state for `silence_timeout_s`) or away (the port
-errors or closes) makes the next call raise `LinkError` saying what to check. A noisy line trips
-the link-quality gate: when bad frames (CRC/COBS/length, either direction), refused setpoints
-(NACK) or bridge watchdog stops pass their configured rate over the last `quality_window_s`,
-`state()` and `send_setpoint()` raise `LinkQualityError` (a LinkError) with the counts, while
-the control messages (stop, servo off) still go out. `quality()` gives the numbers for a status
-line. Leaving the `with` block stops the arm (controlled stop) and disables the servo if it was
-on (`safe_stop`); there is no __del__.
+A reader thread decodes what the bridge sends and keeps the recent states; a setpoint that
+finds the line busy (by the baud rate, see `Link`) is dropped and counted. Control messages
+(enable, stop, tool...) wait for their ACK. A bridge silent for `silence_timeout_s` or gone
+makes the next call raise `LinkError` saying what to check. The link-quality gate
+(robot/link_quality.py): past the [link] max_*_per_s rates of bad frames, refused setpoints or
+watchdog stops, `state()` / `send_setpoint()` raise `LinkQualityError` with the counts while
+stop and servo off still go out; `quality()` gives the numbers for a status line. Leaving the
+`with` block makes a controlled stop and servo off (`safe_stop`); there is no __del__.
 
 Times are `time.monotonic()` seconds on the host; joints in radians.
 """
@@ -27,96 +24,15 @@ from __future__ import annotations
 import threading
 import time
 from collections import deque
-from dataclasses import dataclass
 from typing import Self
 
 import numpy as np
 import serial
 
-from photoservo.errors import InputError
 from photoservo.robot import protocol as P
 from photoservo.robot.link_quality import BAD, REFUSED, WATCHDOG, LinkQuality, QualityWindow, report_events
+from photoservo.robot.link_types import JointState, LinkError, LinkParams, LinkQualityError, describe_nack  # noqa: F401
 from photoservo.robot.pa10 import fk
-
-
-class LinkError(ConnectionError):
-    """The bridge refused a command, went silent, or went away. The message says what to do."""
-
-
-class LinkQualityError(LinkError):
-    """The link-quality gate tripped: too many bad frames, refused setpoints or watchdog stops."""
-
-
-@dataclass(frozen=True)
-class LinkParams:
-    """[link] section of configs/default.toml."""
-
-    baud: int
-    silence_timeout_s: float
-    ack_timeout_s: float
-    history_s: float
-    quality_window_s: float  # the link-quality gate's window (s)
-    max_bad_frames_per_s: float  # bad frames (both directions) per s over the window that stop the arm
-    max_refused_per_s: float  # setpoints the bridge refused, per s over the window
-    max_watchdog_per_s: float  # bridge watchdog stops, per s over the window
-
-    def validate(self, where: str) -> None:
-        w = f"{where}." if where else ""
-        if not 0 < self.baud <= 20_000_000:
-            raise InputError(f"config key '{w}baud': {self.baud} must be in 1..20000000")
-        bounds = {"silence_timeout_s": (0.0, 10.0), "ack_timeout_s": (0.0, 10.0), "history_s": (0.0, 60.0),
-                  "quality_window_s": (0.0, 10.0)}
-        for k, (lo, hi) in bounds.items():
-            v = getattr(self, k)
-            if not lo < v <= hi:
-                raise InputError(f"config key '{w}{k}': {v} must be in ({lo:g}, {hi:g}]")
-        for k in ("max_bad_frames_per_s", "max_refused_per_s", "max_watchdog_per_s"):
-            v = getattr(self, k)
-            if not 0.0 <= v <= 1000.0:  # finite: inf would switch the gate off
-                raise InputError(f"config key '{w}{k}': {v} must be in [0, 1000]")
-
-
-@dataclass(frozen=True)
-class JointState:
-    """A state report as the host knows it.
-
-    t: bridge measurement time on the host clock (s): t_bridge mapped by the smallest observed
-       receive delay (see `Link._clock_offset`), so line and thread-wakeup jitter drop out.
-    t_rx: host monotonic time the report was decoded (s).
-    q, dq: joint positions (rad) and velocities (rad/s).
-    """
-
-    t: float
-    t_rx: float
-    q: np.ndarray
-    dq: np.ndarray
-    status: P.Status
-    fault: P.Fault
-    report: P.StateReport
-
-    @property
-    def servo_on(self) -> bool:
-        return bool(self.status & P.Status.SERVO_ON)
-
-    @property
-    def moving(self) -> bool:
-        return bool(self.status & P.Status.MOVING)
-
-
-def _describe_nack(n: P.Nack, names: tuple[str, ...] | None = None) -> str:
-    try:
-        err = P.Error(n.error).name
-    except ValueError:
-        err = f"error {n.error}"
-    try:
-        what = P.MsgType(n.msg_type).name
-    except ValueError:
-        what = f"type 0x{n.msg_type:02x}"
-    where = ""
-    if n.joint != 255:
-        name = names[n.joint] if names and n.joint < len(names) else f"joint {n.joint + 1}"
-        where = f" at {name} (value {n.value:.4g})"
-    return f"bridge refused {what}: {err}{where}"
 
 
 class Link:
@@ -434,17 +350,16 @@ class Link:
     def _silent_error(self) -> LinkError:
         last = self._history[-1].t_rx if self._history else self._t_open
         what = f"{time.monotonic() - last:.2f} s (limit {self.params.silence_timeout_s:.2f} s)"
-        if self.simulated:
-            return LinkError(f"the simulator's bridge (emulator) on {self.port} sent no state for {what}: "
-                             "it did not get the CPU; the arm stops by itself (watchdog). The machine is "
-                             "too busy: close other programs, or raise [link] silence_timeout_s.")
         q = self._quality.snapshot(time.monotonic())
-        if q.bad_frames_per_s:  # garbled rather than silent
-            return LinkError(f"bridge on {self.port} sent no valid state for {what}; the arm stops by itself "
-                             f"(watchdog). {q.bad_frames_per_s * q.window_s:.0f} bad frames in the last "
-                             f"{q.window_s:g} s. {q.advice(0.0, False)}")
-        return LinkError(f"bridge on {self.port} silent for {what}; the arm stops by itself "
-                         "(watchdog). Check the cable and the bridge power, then reconnect.")
+        if self.simulated:
+            why = ("The simulator's bridge (emulator) did not get the CPU: the machine is too busy; close "
+                   "other programs or raise [link] silence_timeout_s.")
+        elif q.bad_frames_per_s:  # garbled rather than silent
+            why = f"{q.bad_frames_per_s * q.window_s:.0f} bad frames in the last {q.window_s:g} s. {q.advice(0.0, False)}"
+        else:
+            why = "Check the cable and the bridge power, then reconnect."
+        return LinkError(f"bridge on {self.port} silent (no valid state) for {what}; the arm stops by "
+                         f"itself (watchdog). {why}")
 
     def _next_seq(self) -> int:
         self._seq = (self._seq + 1) & 0xFFFF
@@ -499,7 +414,7 @@ class Link:
                     key = seq if expect is P.Ack else -1
                     reply = self._replies.pop(key, None)
                     if isinstance(reply, P.Nack):
-                        raise LinkError(_describe_nack(reply, self.joint_names))
+                        raise LinkError(describe_nack(reply, self.joint_names))
                     if isinstance(reply, expect):
                         return reply
                     left = deadline - time.monotonic()

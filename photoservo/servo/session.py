@@ -32,7 +32,7 @@ import numpy as np
 from photoservo.robot import pa10
 from photoservo.geometry import make_pose, pose_error
 from photoservo.robot import protocol as P
-from photoservo.robot.clock import Rate, set_realtime
+from photoservo.robot.clock import Rate, raise_priority, set_realtime
 from photoservo.config import Config
 from photoservo.servo.control import (
     ServoParams,
@@ -539,7 +539,13 @@ class ControlJob:
     size_truth: tuple[float, float] | None
     t0: float
     settle_s: float
-    rt_priority: int | None
+    rt_priority: int | None  # None: best effort (raise_priority), N: SCHED_FIFO N or an event saying why not
+    simulated: bool = False  # the bridge is the simulator's emulator (errors speak of it)
+
+
+#: SCHED_FIFO priority the control process asks for when no --rt-priority is given (below the
+#: simulator's bridge, sim/emulator_process.py, which it waits on)
+CONTROL_RT_PRIORITY = 20
 
 
 def control_process(job: ControlJob, conn, stop) -> None:
@@ -567,7 +573,9 @@ def control_process(job: ControlJob, conn, stop) -> None:
             except OSError as e:  # not a fault: the loop runs, only less steadily (events say so)
                 ctrl.events.append((time.monotonic(), f"real-time priority {job.rt_priority} refused "
                                                       f"({e.strerror}); control runs without it"))
-        with Link(job.port, cfg.link) as link:
+        else:  # a busy machine must not starve the arm's loop: the best the system permits
+            ctrl.events.append((time.monotonic(), f"control process scheduling: {raise_priority(CONTROL_RT_PRIORITY)}"))
+        with Link(job.port, cfg.link, simulated=job.simulated) as link:
             link.wait_state()
             if not job.no_motion:
                 link.enable()
@@ -591,7 +599,7 @@ def control_process(job: ControlJob, conn, stop) -> None:
                                           job.settle_s, job.centre)
                     conn.send(("tick", now, st.t, st.q, info.setpoint.q, info.setpoint.dq, info.T_base_cam_des,
                                info.phase, info.position_error_mm, info.yaw_error_deg, info.stop_reason,
-                               ctrl.events[n_events:]))
+                               ctrl.events[n_events:], link.quality()))
                     n_events = len(ctrl.events)
                     sc.time("control_ms", 1e3 * (time.monotonic() - now))
                     sc.time("control_late", 1e3 * rate.sleep())
@@ -612,7 +620,7 @@ def run_realtime(cfg: Config, duration_s: float, *, port: str, cameras, model, r
                  collect: bool = False, no_motion: bool = False, recorder=None,
                  status: StatusFn | None = None, seed: int = 0, scene: SimScene | None = None,
                  t0: float | None = None, settle_s: float = 5.0, rt_priority: int | None = None,
-                 stop_event: threading.Event | None = None) -> Scores:
+                 stop_event: threading.Event | None = None, simulated: bool = False) -> Scores:
     """The real-time session. The control loop (`control_process`) runs in its own process,
     connected to the bridge at `port`; this process reads stereo frames from `cameras` (`read()`
     -> (index, left, right, t_left, t_right) on the monotonic clock), places each at the joint
@@ -629,7 +637,7 @@ def run_realtime(cfg: Config, duration_s: float, *, port: str, cameras, model, r
     child_stop = ctx.Event()
     job = ControlJob(cfg, port, T_fl, left_centre(rig), collect, no_motion,
                      None if scene is None else scene.motion, None if scene is None else scene.size_mm(),
-                     t0, settle_s, rt_priority)
+                     t0, settle_s, rt_priority, simulated)
     proc = ctx.Process(target=control_process, args=(job, child, child_stop), name="photoservo-control", daemon=True)
     proc.start()
     history = StateHistory()
@@ -645,9 +653,9 @@ def run_realtime(cfg: Config, duration_s: float, *, port: str, cameras, model, r
             except (EOFError, OSError):
                 return
             if msg[0] == "tick":
-                _, now, t_state, q, sp_q, sp_dq, T_des, phase, err, yaw, stop_reason, events = msg
+                _, now, t_state, q, sp_q, sp_dq, T_des, phase, err, yaw, stop_reason, events, quality = msg
                 history.append(t_state, q)
-                latest.update(t=now, phase=phase, err=err, yaw=yaw, stop=stop_reason)
+                latest.update(t=now, phase=phase, err=err, yaw=yaw, stop=stop_reason, link=quality)
                 if recorder is not None:
                     for t_e, text in events:
                         recorder.event(t_e - t0, text)  # the controller's clock is monotonic
@@ -700,7 +708,7 @@ def run_realtime(cfg: Config, duration_s: float, *, port: str, cameras, model, r
                         "status": track.status, "fitness": track.fitness,
                         "position_mm": None if track.T_base_model is None else track.T_base_model[:3, 3],
                         "alpha": track.alpha, "error_mm": latest["err"], "yaw_deg": latest["yaw"],
-                        "phase": latest["phase"], "stop": latest["stop"],
+                        "phase": latest["phase"], "stop": latest["stop"], "link": latest["link"],
                         "fps": 1e3 / float(np.median(sc.timings_ms["frame"][-30:]))})
     finally:
         child_stop.set()
@@ -722,14 +730,14 @@ def run_realtime(cfg: Config, duration_s: float, *, port: str, cameras, model, r
 
 def run_sim_realtime(cfg: Config, duration_s: float, sim: SimSetup, emulator, **kwargs) -> Scores:
     """`run_realtime` on the simulator: cameras rendering the scene from where `emulator` (a
-    started `robot.emulator.Emulator`) has the arm, the control process on its pty, hold scored
-    against the truth. kwargs go to `run_realtime`."""
+    started sim.emulator.Emulator, or EmulatorProcess as `track` runs it) has the arm, the
+    control process on its pty, hold scored against the truth. kwargs go to `run_realtime`."""
     cams = SimCameras(cfg, emulator, sim.rig.T_flange_left())
     t0 = time.monotonic()
     cams.start(t0)
     try:
         return run_realtime(cfg, duration_s, port=emulator.path, cameras=cams, model=sim.scene.model,
-                            rig=sim.rig, scene=sim.scene, t0=t0, **kwargs)
+                            rig=sim.rig, scene=sim.scene, t0=t0, simulated=True, **kwargs)
     finally:
         cams.close()
 
