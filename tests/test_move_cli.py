@@ -83,13 +83,8 @@ def test_move_bad_port_is_one_line_exit_2(tmp_path, capsys):
 
 
 def test_move_ctrl_c_makes_controlled_stop(emu):
-    target = np.degrees(HOME_Q) + [60.0, 0, 0, 0, 0, 0, 0]  # ~3 s at 50 % speed
-    p = subprocess.Popen([PY, "-m", "photoservo.cli", "move", "--port", emu.path, "--joints",
-                          *map(str, target), "--speed", "50", "--no-record"],
-                         stderr=subprocess.PIPE, text=True)
+    target, p = _move_under_way(emu)
     try:
-        assert _wait(lambda: emu.true_state().status & P.Status.MOVING, 15.0), "never started moving"
-        time.sleep(0.3)
         p.send_signal(signal.SIGINT)
         _, err = p.communicate(timeout=15)
     finally:
@@ -146,6 +141,19 @@ def test_docs_mention_both_verbs():
     assert "pa10-sim" in readme
 
 
+def _move_under_way(emu) -> tuple[np.ndarray, subprocess.Popen]:
+    """A `move` process 0.3 s into a ~3 s move of S1 by 60 deg at 50 % speed."""
+    target = np.degrees(HOME_Q) + [60.0, 0, 0, 0, 0, 0, 0]
+    p = subprocess.Popen([PY, "-m", "photoservo.cli", "move", "--port", emu.path, "--joints",
+                          *map(str, target), "--speed", "50", "--no-record"],
+                         stderr=subprocess.PIPE, text=True)
+    if not _wait(lambda: emu.true_state().status & P.Status.MOVING, 15.0):
+        p.kill()
+        raise AssertionError("never started moving")
+    time.sleep(0.3)
+    return target, p
+
+
 def _error_lines(err: str) -> list[str]:
     """stderr's lines, the progress line's carriage-return redraws dropped."""
     return [ln.rsplit("\r", 1)[-1].strip() for ln in err.splitlines() if ln.rsplit("\r", 1)[-1].strip()]
@@ -154,13 +162,8 @@ def _error_lines(err: str) -> list[str]:
 def test_noisy_line_mid_move_stops_the_arm_within_1s_exit_3(emu):
     # the line turns 1 % corrupt + 1 % drop (each byte, both directions) while the arm moves:
     # the link-quality gate stops the move (controlled stop), one line with the counts, exit 3
-    target = np.degrees(HOME_Q) + [60.0, 0, 0, 0, 0, 0, 0]  # ~3 s at 50 % speed
-    p = subprocess.Popen([PY, "-m", "photoservo.cli", "move", "--port", emu.path, "--joints",
-                          *map(str, target), "--speed", "50", "--no-record"],
-                         stderr=subprocess.PIPE, text=True)
+    target, p = _move_under_way(emu)
     try:
-        assert _wait(lambda: emu.true_state().status & P.Status.MOVING, 15.0), "never started moving"
-        time.sleep(0.3)
         emu.line_faults(drop=0.01, corrupt=0.01)
         t_noise = time.monotonic()
         assert _wait(lambda: not emu.true_state().status & P.Status.MOVING, 5.0)

@@ -348,3 +348,16 @@ def ik(T_target: np.ndarray, q0, limits: PA10Limits, *, T_flange_tool: np.ndarra
             best = (ep, eo)
     raise IKError(f"inverse kinematics did not converge: residual {best[0]:.3f} mm, "
                   f"{math.degrees(best[1]):.4f} deg (target unreachable within the joint ranges?)")
+
+
+#: the links' capsule axes run between these frame origins (fk_frames indices): shoulder (2) ->
+#: elbow (3) is the upper arm, elbow (4, same origin) -> wrist (5) the forearm, wrist (6) ->
+#: flange (7) the wrist; frames 1/2, 3/4 and 5/6 share origins (a = 0, d_2 = d_4 = d_6 = 0)
+CAPSULE_ENDS = (2, 3, 5, 7)
+
+
+def link_capsules(frames: np.ndarray) -> np.ndarray:
+    """The capsule end points (..., 4, 3) (mm, base frame) — shoulder, elbow, wrist, flange —
+    from `fk_frames` output (..., 8, 4, 4): consecutive ends bound the upper arm, the forearm
+    and the wrist (radii: [motion] link_radii_mm, servo/keepout.py)."""
+    return frames[..., CAPSULE_ENDS, :3, 3]
