@@ -10,15 +10,9 @@ import numpy as np
 import pytest
 
 from photoservo.config import load_config
-from photoservo.vision.estimator import (
-    Convergence,
-    GeneSpace,
-    PoseSearch,
-    estimate,
-    match_blobs,
-    reflected_rotation,
-    target_blobs,
-)
+from photoservo.vision.estimator import estimate
+from photoservo.vision.pose_search import Convergence, GeneSpace, PoseSearch, reflected_rotation
+from photoservo.vision.seeding import match_blobs, target_blobs
 from photoservo.vision.fitness import stereo_hue
 from photoservo.vision.photo_model import build_photo_model
 from photoservo.geometry import heading_tilt_error, rotation_from_heading_tilt
@@ -159,7 +153,8 @@ def test_stereo_plane_fit_recovers_the_tilt(scene):
 def test_detection_needs_both_cameras_and_the_outline(scene):
     """`detect`: the true pose passes; a model shrunk inside the creature (its outer band lands on
     target hue) fails the outline check even where its inner points all agree."""
-    from photoservo.vision.estimator import Candidate, detect
+    from photoservo.vision.detection import detect
+    from photoservo.vision.pose_search import Candidate
 
     sc, model = scene
     R, t, alpha = truth(sc)

@@ -8,7 +8,7 @@ import pytest
 from photoservo.robot import pa10
 from photoservo.config import load_config
 from photoservo.servo.session import build_sim
-from photoservo.vision.estimator import GeneSpace
+from photoservo.vision.pose_search import GeneSpace
 from photoservo.vision.fitness import stereo_hue
 from photoservo.sim.renderer import Scene
 from photoservo.vision.tracker import Tracker, on_plane

@@ -28,7 +28,8 @@ from typing import Literal, Protocol
 import numpy as np
 
 from photoservo.errors import InputError
-from photoservo.vision.estimator import EstimatorParams, PoseSearch, estimate
+from photoservo.vision.estimator import EstimatorParams, estimate
+from photoservo.vision.pose_search import PoseSearch
 from photoservo.vision.fitness import FitnessParams, StereoHue
 from photoservo.vision.ga import GAParams
 from photoservo.vision.photo_model import PhotoModel

@@ -1,0 +1,366 @@
+"""The GA over poses (method steps 4-5): the 7 genes, their decoding into (R, t, alpha), the
+convergence test and `PoseSearch`, one persistent GA population searching poses of a photo-model
+against a stereo frame — an island of the acquisition (`vision/estimator.py`) or the tracker's
+population (`vision/tracker.py`).
+
+Genes. The paper's 7 genes are (x, y, z, three orientation parameters, alpha). By default
+(`[estimator] genes = "image"`) the same 7 degrees of freedom are coded so that the search box
+is the rig's field of view and the fitness landscape is nearly separable:
+
+    g = (u, v, q, psi, tilt_x, tilt_y, ln s)
+
+    u, v    px   where the model origin projects in the LEFT image (pinhole, no distortion)
+    q       1/m  inverse depth, q = 1000 / z          (uniform in q = uniform in disparity)
+    psi     rad  heading, tilt_x, tilt_y rad: tilt rotation vector (see `geometry.py`)
+    ln s         s = fx / (alpha z): image px per photo px at a frontal pose
+
+    t = z · K^-1 (u, v, 1),   alpha = fx / (s z),   R = R_tilt(tilt_x, tilt_y) · Rz(psi)
+
+One image fixes (u, v, s) and the heading; the second camera fixes q through parallax — and with
+it alpha: a big far model and a small near one agree in one camera, not in two (method step 3).
+`genes = "cartesian"` is the paper's literal coding (x, y, z, psi, tilt_x, tilt_y, ln alpha).
+
+Default search volume: the left image (u, v) with the origin also inside the right image, depth
+z_min..z_max, any heading, tilt <= tilt_max, alpha_min..alpha_max and an apparent size of at
+least `min_apparent_px`; candidates outside it score -inf.
+
+Tracking API (`PoseSearch`): `set_frame` for a new frame, `set_window` around a predicted pose,
+`reset_full` to re-acquire, `seed` to inject poses, `step(n)`.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Literal
+
+import cv2
+import numpy as np
+
+from photoservo.geometry import (
+    heading_tilt_from_rotation,
+    rotation_from_heading_tilt,
+)
+from photoservo.vision.fitness import FitnessParams, StereoHue, fitness
+from photoservo.vision.ga import GA, GAParams, Region
+from photoservo.vision.photo_model import HUE_BINS, PhotoModel
+from photoservo.vision.rig import Rig
+from photoservo.vision.stereo_plane import align_to_plane, fit_target_plane, grey
+
+if TYPE_CHECKING:
+    from photoservo.vision.estimator import EstimatorParams
+
+GENE_NAMES = {
+    "image": ("u_px", "v_px", "q_per_m", "psi", "tilt_x", "tilt_y", "ln_s"),
+    "cartesian": ("x_mm", "y_mm", "z_mm", "psi", "tilt_x", "tilt_y", "ln_alpha"),
+}
+
+
+# ----------------------------------------------------------------------------- gene spaces
+
+
+@dataclass(frozen=True)
+class GeneSpace:
+    """Decodes genes (P, 7) into poses for one rig and photo-model (module docstring)."""
+
+    kind: Literal["image", "cartesian"]
+    rig: Rig
+    model: PhotoModel
+    params: EstimatorParams
+
+    @property
+    def fx(self) -> float:
+        return float(self.rig.left.K[0, 0])
+
+    def decode(self, g: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Genes (P, 7) -> (R (P,3,3), t (P,3) mm, alpha (P,) px/mm, valid (P,) bool).
+        Tilt beyond tilt_max is clamped onto it; `valid` is False outside the search volume:
+        depth or alpha out of range, model origin outside either image (pinhole), apparent size
+        below min_apparent_px. (Called once per generation: kept to few numpy operations.)"""
+        g = np.asarray(g, dtype=np.float64)
+        if g.ndim == 1:
+            g = g[None]
+        p, K, rig = self.params, self.rig.left.K, self.rig
+        tmax = math.radians(p.tilt_max_deg)
+        tx, ty = g[:, 4], g[:, 5]
+        th2 = tx * tx + ty * ty
+        if np.any(th2 > tmax * tmax):
+            shrink = np.minimum(1.0, tmax / np.sqrt(np.maximum(th2, 1e-24)))
+            tx, ty = tx * shrink, ty * shrink
+        R = rotation_from_heading_tilt(g[:, 3], tx, ty)
+        t = np.empty((len(g), 3))
+        if self.kind == "image":
+            z = 1000.0 / g[:, 2]
+            t[:, 0] = (g[:, 0] - K[0, 2]) * (z / K[0, 0])
+            t[:, 1] = (g[:, 1] - K[1, 2]) * (z / K[1, 1])
+            t[:, 2] = z
+            alpha = self.fx / (np.exp(g[:, 6]) * z)
+        else:
+            t[:] = g[:, :3]
+            z = t[:, 2]
+            alpha = np.exp(g[:, 6])
+        valid = (z >= p.z_min_mm * 0.999) & (z <= p.z_max_mm * 1.001)
+        valid &= (alpha >= p.alpha_min * 0.999) & (alpha <= p.alpha_max * 1.001)
+        # apparent size (longest side of the target in the image at a frontal pose)
+        valid &= alpha * z <= self.fx * max(self.model.size_px) / p.min_apparent_px
+        # the model origin must be seen by both cameras
+        with np.errstate(divide="ignore", invalid="ignore"):
+            for cam, X in ((rig.left, t), (rig.right, t @ rig.R.T + rig.T)):
+                w = 1.0 / X[:, 2]
+                uc = X[:, 0] * w * cam.K[0, 0] + cam.K[0, 2]
+                vc = X[:, 1] * w * cam.K[1, 1] + cam.K[1, 2]
+                valid &= (w > 0) & (uc >= -0.5) & (uc <= cam.width - 0.5) & (vc >= -0.5) & (vc <= cam.height - 0.5)
+        return R, t, alpha, valid
+
+    def encode(self, R: np.ndarray, t: np.ndarray, alpha: np.ndarray) -> np.ndarray:
+        """Poses -> genes (P, 7), the inverse of `decode` (tilt not clamped)."""
+        R = np.asarray(R, dtype=np.float64).reshape(-1, 3, 3)
+        t = np.asarray(t, dtype=np.float64).reshape(-1, 3)
+        alpha = np.asarray(alpha, dtype=np.float64).reshape(-1)
+        psi, tx, ty = heading_tilt_from_rotation(R)
+        if self.kind == "image":
+            K = self.rig.left.K
+            z = t[:, 2]
+            u = K[0, 0] * t[:, 0] / z + K[0, 2]
+            v = K[1, 1] * t[:, 1] / z + K[1, 2]
+            return np.column_stack([u, v, 1000.0 / z, psi, tx, ty, np.log(self.fx / (alpha * z))])
+        return np.column_stack([t, psi, tx, ty, np.log(alpha)])
+
+    def full_region(self) -> Region:
+        """The default search volume as a gene box (module docstring)."""
+        p, cam = self.params, self.rig.left
+        tmax = math.radians(p.tilt_max_deg)
+        if self.kind == "image":
+            # apparent scale s = fx / (alpha z): from the smallest apparent size to the largest s
+            # any (alpha, z) of the volume allows, capped at 3x the image width
+            longest = max(self.model.size_px)
+            s_lo = p.min_apparent_px / longest
+            s_hi = min(self.fx / (p.alpha_min * p.z_min_mm), 3.0 * cam.width / longest)
+            s_lo = max(s_lo, self.fx / (p.alpha_max * p.z_max_mm))
+            lo = [-0.5, -0.5, 1000.0 / p.z_max_mm, -math.pi, -tmax, -tmax, math.log(s_lo)]
+            hi = [cam.width - 0.5, cam.height - 0.5, 1000.0 / p.z_min_mm, math.pi, tmax, tmax,
+                  math.log(max(s_hi, s_lo * 1.01))]
+        else:
+            half_w = p.z_max_mm * max(cam.K[0, 2] + 0.5, cam.width - cam.K[0, 2]) / cam.K[0, 0]
+            half_h = p.z_max_mm * max(cam.K[1, 2] + 0.5, cam.height - cam.K[1, 2]) / cam.K[1, 1]
+            lo = [-half_w, -half_h, p.z_min_mm, -math.pi, -tmax, -tmax, math.log(p.alpha_min)]
+            hi = [half_w, half_h, p.z_max_mm, math.pi, tmax, tmax, math.log(p.alpha_max)]
+        return Region.box(lo, hi, [False, False, False, True, False, False, False])
+
+    def window(self, R: np.ndarray, t: np.ndarray, alpha: float, position_mm: float,
+               heading_deg: float, tilt_deg: float, alpha_frac: float) -> Region:
+        """A gene box around one pose: position +- position_mm (converted to image px and inverse
+        depth for the image coding), heading +- heading_deg (>= 180: any), tilt +- tilt_deg,
+        alpha within a factor (1 +- alpha_frac). Clipped to the full volume."""
+        g0 = self.encode(R, t, alpha)[0]
+        full = self.full_region()
+        z = float(np.asarray(t).reshape(3)[2])
+        tw = math.radians(tilt_deg)
+        la = math.log1p(alpha_frac)
+        if self.kind == "image":
+            du = self.rig.left.K[0, 0] * position_mm / z
+            dv = self.rig.left.K[1, 1] * position_mm / z
+            dq = 1000.0 / max(z - position_mm, 1e-3) - 1000.0 / z
+            half = np.array([du, dv, dq, 0.0, tw, tw, la])
+        else:
+            half = np.array([position_mm, position_mm, position_mm, 0.0, tw, tw, la])
+        lo, hi = g0 - half, g0 + half
+        periodic = np.zeros(7, bool)
+        if heading_deg >= 180:
+            lo[3], hi[3], periodic[3] = -math.pi, math.pi, True
+        else:
+            lo[3], hi[3] = g0[3] - math.radians(heading_deg), g0[3] + math.radians(heading_deg)
+        keep = ~periodic
+        keep[3] = False
+        lo[keep] = np.maximum(lo[keep], full.lo[keep])
+        hi[keep] = np.minimum(hi[keep], full.hi[keep])
+        hi = np.maximum(hi, lo + 1e-9)
+        return Region.box(lo, hi, periodic)
+
+# ----------------------------------------------------------------------------- convergence
+
+
+class Convergence:
+    """Converged (method step 4, our definition): over the last `patience` generations the best
+    individual's fitness rose by less than `fitness_tol`, its position moved less than
+    `position_tol_mm`, its rotation turned less than `rotation_tol_deg` and its alpha changed by
+    less than the fraction `alpha_tol` — and at least `min_generations` generations ran."""
+
+    def __init__(self, params: EstimatorParams) -> None:
+        self.p = params
+        self.history: list[tuple[float, np.ndarray, np.ndarray, float]] = []
+
+    def update(self, f: float, R: np.ndarray, t: np.ndarray, alpha: float) -> bool:
+        """Record generation's best; True when converged."""
+        self.history.append((f, R, t, alpha))
+        n = len(self.history)
+        p = self.p
+        if n <= max(p.patience, p.min_generations):
+            return False
+        f0, R0, t0, a0 = self.history[-1 - p.patience]
+        if not np.isfinite(f) or f - f0 > p.fitness_tol:
+            return False
+        if np.linalg.norm(t - t0) > p.position_tol_mm:
+            return False
+        c = np.clip((np.trace(R0.T @ R) - 1.0) / 2.0, -1.0, 1.0)
+        if math.degrees(math.acos(c)) > p.rotation_tol_deg:
+            return False
+        return abs(alpha / a0 - 1.0) <= p.alpha_tol
+
+# ----------------------------------------------------------------------------- the search
+
+
+@dataclass(frozen=True)
+class Candidate:
+    """One candidate pose: model in the left camera frame, R (3,3), position (3,) mm, alpha px/mm."""
+
+    R: np.ndarray
+    position_mm: np.ndarray
+    alpha: float
+    fitness: float
+    generations: int
+    source: str  # "blob 0", "blob 1", ..., "global"
+
+
+class PoseSearch:
+    """One GA searching poses of `model` against a stereo frame (method steps 4-5). The
+    population persists: `set_frame` swaps the frame, `set_window` / `reset_full` the region,
+    `seed` injects poses, `step(n)` advances n generations. Used by `estimate` (one per island)
+    and by the tracking loop (one for the whole run)."""
+
+    def __init__(self, model: PhotoModel, rig: Rig, frame: StereoHue, ga_params: GAParams,
+                 est_params: EstimatorParams, fit_params: FitnessParams, rng: np.random.Generator,
+                 region: Region | None = None) -> None:
+        self.model, self.rig, self.frame = model, rig, frame
+        self.fit_params, self.est_params = fit_params, est_params
+        self.space = GeneSpace(est_params.genes, rig, model, est_params)
+        self.ga = GA(self._fitness, region or self.space.full_region(), ga_params, rng)
+        self._best_cache: tuple[np.ndarray, np.ndarray, np.ndarray, float] | None = None
+
+    def _fitness(self, g: np.ndarray) -> np.ndarray:
+        R, t, alpha, valid = self.space.decode(g)
+        f = np.full(len(g), -np.inf)
+        if np.any(valid):
+            f[valid] = fitness(R[valid], t[valid], alpha[valid], self.model, self.frame, self.rig,
+                               self.fit_params)
+        return f
+
+    def set_frame(self, frame: StereoHue) -> None:
+        """A new stereo frame; the population is re-scored on it."""
+        self.frame = frame
+        self.ga.set_fitness(self._fitness)
+
+    def set_window(self, R: np.ndarray, t: np.ndarray, alpha: float, position_mm: float,
+                   heading_deg: float, tilt_deg: float, alpha_frac: float) -> None:
+        """Search a window around a predicted pose (see `GeneSpace.window`)."""
+        self.ga.set_region(self.space.window(R, t, alpha, position_mm, heading_deg, tilt_deg, alpha_frac))
+
+    def reset_full(self) -> None:
+        """Back to the whole search volume with a fresh population (re-acquisition)."""
+        self.ga.reset(self.space.full_region())
+
+    def seed(self, R: np.ndarray, t: np.ndarray, alpha: np.ndarray) -> None:
+        """Inject poses (model in left camera frame) into the population."""
+        self.ga.inject(self.space.encode(R, t, alpha))
+
+    def step(self, generations: int = 1) -> Candidate:
+        """Advance `generations` generations; the best pose so far."""
+        self.ga.step(generations)
+        return self.best()
+
+    def best(self, source: str = "") -> Candidate:
+        """The best individual decoded (the decoding is cached while the best genes stay put)."""
+        g, f = self.ga.best()
+        if self._best_cache is None or not np.array_equal(self._best_cache[0], g):
+            R, t, alpha, _ = self.space.decode(g)
+            self._best_cache = (g, R[0], t[0], float(alpha[0]))
+        _, R, t, alpha = self._best_cache
+        return Candidate(R=R, position_mm=t, alpha=alpha, fitness=f, generations=self.ga.generation, source=source)
+
+    def run(self, ambiguity_check: bool = True) -> Candidate:
+        """Evolve until converged (`Convergence`) or max_generations; the best pose.
+
+        With `ambiguity_check`, the converged pose's look-alike twins are then tried, each by a
+        short GA of its own in a narrow window around it (`alternatives`): the mirror of the
+        planar pose ambiguity (normal reflected about the line of sight), the heading turned by
+        180 degrees, and both. A twin that scores higher replaces the pose."""
+        p = self.est_params
+        conv = Convergence(p)
+        for _ in range(p.max_generations):
+            c = self.step(1)
+            if conv.update(c.fitness, c.R, c.position_mm, c.alpha):
+                break
+        best = self.best()
+        return self.resolve_twins(best) if ambiguity_check else best
+
+    def local_search(self, R: np.ndarray, t: np.ndarray, alpha: float, position_frac: float, heading_deg: float,
+                     tilt_deg: float, alpha_frac: float) -> Candidate:
+        """A short GA of its own (half the patience) in a narrow window around one pose, seeded
+        with it; its work is counted in this search's generations and evaluations."""
+        p = self.est_params
+        short = dataclasses.replace(p, min_generations=max(1, p.patience // 2), patience=max(2, p.patience // 2),
+                                    max_generations=max(p.patience, p.max_generations // 4))
+        sub = PoseSearch(self.model, self.rig, self.frame, self.ga.params, short, self.fit_params, self.ga.rng)
+        sub.ga.reset(sub.space.window(R, t, alpha, position_mm=position_frac * float(t[2]), heading_deg=heading_deg,
+                                      tilt_deg=tilt_deg, alpha_frac=alpha_frac))
+        sub.seed(R, t, alpha)
+        c = sub.run(ambiguity_check=False)
+        self.ga.evaluations += sub.ga.evaluations
+        self.ga.generation += c.generations
+        return c
+
+    def resolve_twins(self, best: Candidate) -> Candidate:
+        """Try the look-alike twins of a converged pose (`alternatives`), each by a short GA in a
+        narrow window around it; the best of the pose and its twins."""
+        if not np.isfinite(best.fitness):
+            return best
+        for R_alt in alternatives(best.R, best.position_mm):
+            c = self.local_search(R_alt, best.position_mm, best.alpha, position_frac=0.03, heading_deg=15.0,
+                                  tilt_deg=15.0, alpha_frac=0.08)
+            if c.fitness > best.fitness:
+                best = c
+                self.ga.inject(self.space.encode(c.R, c.position_mm, c.alpha))
+        return Candidate(best.R, best.position_mm, best.alpha, best.fitness, self.ga.generation, best.source)
+
+    def refine_tilt(self, best: Candidate, left_bgr: np.ndarray, right_bgr: np.ndarray) -> Candidate:
+        """Tilt from the disparity gradient (`vision/stereo_plane.py`): fit the target's plane
+        from stereo over the inner points that land on target hue, turn the pose onto it, re-fit
+        position, heading and scale by a short GA with the tilt held within 1.5 deg, and keep the
+        result when its fitness is at most `plane_fitness_tol` below `best` (the hue fitness
+        vetoes a plane fitted to the wrong thing)."""
+        lut = np.zeros(256, bool)
+        lut[:HUE_BINS] = np.asarray(self.model.target_hues, bool)
+        plane = fit_target_plane(best.R, best.position_mm, best.alpha, self.model, grey(left_bgr),
+                                 grey(right_bgr), self.rig, on_target=lut[self.frame.left])
+        if plane is None:
+            return best
+        R2, t2 = align_to_plane(best.R, best.position_mm, plane)
+        c = self.local_search(R2, t2, best.alpha, position_frac=0.02, heading_deg=5.0, tilt_deg=1.5, alpha_frac=0.05)
+        if c.fitness >= best.fitness - self.est_params.plane_fitness_tol:
+            return Candidate(c.R, c.position_mm, c.alpha, c.fitness, self.ga.generation, best.source)
+        return best
+
+
+def alternatives(R: np.ndarray, t: np.ndarray) -> list[np.ndarray]:
+    """Orientations a flat target's pose is easily confused with (see `PoseSearch.run`): the
+    planar-ambiguity mirror, the heading turned by 180 degrees about the model normal, and both."""
+    half_turn = np.diag([-1.0, -1.0, 1.0])  # Rz(pi): heading + 180 deg
+    R_m = reflected_rotation(R, t)
+    return [R_m, R @ half_turn, R_m @ half_turn]
+
+
+def reflected_rotation(R: np.ndarray, t: np.ndarray) -> np.ndarray:
+    """The other solution of the planar pose ambiguity: a flat target seen along the ray d = t/|t|
+    looks nearly alike with its normal n and with n' = 2 (n·d) d - n (the normal mirrored about
+    the line of sight). Returns R' = Rot(n -> n') · R, the smallest turn taking n to n'."""
+    d = np.asarray(t, dtype=np.float64) / np.linalg.norm(t)
+    n = R[:, 2]
+    n2 = 2.0 * (n @ d) * d - n
+    axis = np.cross(n, n2)
+    s = np.linalg.norm(axis)
+    if s < 1e-12:
+        return R.copy()
+    ang = math.atan2(s, float(n @ n2))
+    rvec = axis / s * ang
+    return cv2.Rodrigues(rvec)[0] @ R

@@ -1,0 +1,188 @@
+"""Seeding the acquisition's GA islands (method step 4, our addition): where in the stereo pair
+the photo's creature may be, before any pose is scored.
+
+The target's hues (the model's `target_hues`) are segmented in both images; blobs are paired
+along the epipolar lines and triangulated, which gives the model origin's pixel (u, v) and inverse
+depth q, the apparent scale s from the blob area and two heading hypotheses from the blob's
+principal axis (`seed_genes`).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+import cv2
+import numpy as np
+
+from photoservo.vision.ga import Region
+from photoservo.vision.photo_model import HUE_BINS, PhotoModel
+from photoservo.vision.pose_search import GeneSpace
+from photoservo.vision.rig import Rig
+
+if TYPE_CHECKING:
+    from photoservo.vision.estimator import EstimatorParams
+
+
+@dataclass(frozen=True)
+class Blob:
+    """A connected region of target hue in one image: centroid (u, v) px, area px, major-axis
+    angle (rad, image x toward y) and elongation (major / minor axis)."""
+
+    centroid: np.ndarray
+    area: float
+    angle: float
+    elongation: float
+
+
+def _moments_shape(m: dict) -> tuple[np.ndarray, float, float, float]:
+    a = m["m00"]
+    c = np.array([m["m10"] / a, m["m01"] / a])
+    mu20, mu02, mu11 = m["mu20"] / a, m["mu02"] / a, m["mu11"] / a
+    angle = 0.5 * math.atan2(2 * mu11, mu20 - mu02)
+    d = math.sqrt(max(0.0, 4 * mu11 * mu11 + (mu20 - mu02) ** 2))
+    l1, l2 = (mu20 + mu02 + d) / 2, (mu20 + mu02 - d) / 2
+    return c, a, angle, math.sqrt(l1 / max(l2, 1e-9))
+
+
+def target_blobs(hue: np.ndarray, target_hues: np.ndarray, min_px: int, max_blobs: int = 12,
+                 merge_px: int = 9) -> list[Blob]:
+    """Blobs of the model's target hues in a hue image (largest first). Pieces closer than about
+    `merge_px` (a creature cut up by foam, glints or its own markings) count as one blob; its
+    area and moments are those of the target-hue pixels only."""
+    lut = np.zeros(256, np.uint8)
+    lut[:HUE_BINS] = np.asarray(target_hues, bool) * 255
+    mask = cv2.morphologyEx(lut[hue], cv2.MORPH_CLOSE, cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (5, 5)))
+    grouped = cv2.dilate(mask, cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (merge_px, merge_px)))
+    _, labels, stats, _ = cv2.connectedComponentsWithStats(grouped, connectivity=8)
+    labels[mask == 0] = 0
+    area = np.bincount(labels.ravel(), minlength=len(stats)).astype(float)
+    order = [i for i in np.argsort(-area, kind="stable") if i > 0 and area[i] >= min_px]
+    blobs = []
+    for i in order[:max_blobs]:
+        x, y, w, h = stats[i, :4]
+        m = cv2.moments((labels[y:y + h, x:x + w] == i).astype(np.uint8), binaryImage=True)
+        c, a, ang, el = _moments_shape(m)
+        blobs.append(Blob(centroid=c + (x, y), area=a, angle=ang, elongation=el))
+    return blobs
+
+
+@dataclass(frozen=True)
+class BlobPair:
+    """A left and a right blob matched along the epipolar line, triangulated: origin guess in
+    the left camera frame (mm), the left blob, the epipolar residual (px)."""
+
+    position_mm: np.ndarray
+    left: Blob
+    right: Blob
+    residual_px: float
+
+
+def match_blobs(left: list[Blob], right: list[Blob], rig: Rig, params: EstimatorParams) -> list[BlobPair]:
+    """Pair blobs whose centroids lie on each other's epipolar lines (within epipolar_tol_px plus
+    a share of the blob size), whose triangulated depth is in the search volume and whose areas
+    agree within 2.5x; each left blob takes its best right blob. Largest first."""
+    if not left or not right:
+        return []
+    def norm(blobs: list[Blob], cam) -> np.ndarray:
+        pts = np.array([b.centroid for b in blobs], np.float64).reshape(-1, 1, 2)
+        return cv2.undistortPoints(pts, cam.K, cam.dist).reshape(-1, 2)
+    nl, nr = norm(left, rig.left), norm(right, rig.right)
+    R, T = rig.R, rig.T
+    tx = np.array([[0, -T[2], T[1]], [T[2], 0, -T[0]], [-T[1], T[0], 0]])
+    E = tx @ R  # x_r^T E x_l = 0
+    f = float(rig.right.K[0, 0])
+    pairs = []
+    for i, bl in enumerate(left):
+        xl = np.array([nl[i, 0], nl[i, 1], 1.0])
+        line = E @ xl
+        best = None
+        for j, br in enumerate(right):
+            if not (1 / 2.5 <= br.area / bl.area <= 2.5):
+                continue
+            xr = np.array([nr[j, 0], nr[j, 1], 1.0])
+            err = abs(line @ xr) / max(math.hypot(line[0], line[1]), 1e-12) * f
+            if err > params.epipolar_tol_px + 0.15 * math.sqrt(min(bl.area, br.area)):
+                continue
+            # depth along the left ray: least squares of  z_l R xl + T = z_r xr
+            A = np.column_stack([R @ xl, -xr])
+            (zl, zr), *_ = np.linalg.lstsq(A, -T, rcond=None)
+            if not (params.z_min_mm <= zl <= params.z_max_mm) or zr <= 0:
+                continue
+            if best is None or err < best[0]:
+                best = (err, zl * xl, br)
+        if best is not None:
+            pairs.append(BlobPair(position_mm=best[1], left=bl, right=best[2], residual_px=best[0]))
+    return pairs
+
+
+@dataclass(frozen=True)
+class ModelShape:
+    """Area (photo px), centroid offset from the model origin (px) and principal axis of the
+    photo-model's target mask — what a blob is compared with."""
+
+    area: float
+    centroid_uv: np.ndarray
+    angle: float
+    elongation: float
+
+    @staticmethod
+    def of(model: PhotoModel) -> ModelShape:
+        m = cv2.moments((np.asarray(model.mask) > 0).astype(np.uint8), binaryImage=True)
+        c, a, ang, el = _moments_shape(m)
+        return ModelShape(area=a, centroid_uv=c - np.asarray(model.origin_px), angle=ang, elongation=el)
+
+
+def seed_genes(pair: BlobPair, shape: ModelShape, space: GeneSpace, rng: np.random.Generator,
+               n: int) -> tuple[np.ndarray, Region]:
+    """Seed individuals (n, 7) and the island's window for one blob pair (image coding).
+
+    Apparent scale s from the blob area (s^2 = area_blob / area_model; a tilt shrinks the blob,
+    so the window reaches further up than down), headings psi from the difference of principal
+    axes (two hypotheses, 180 deg apart; random when either shape is nearly round), origin = blob
+    centroid minus the rotated, scaled centroid offset of the photo mask."""
+    p = space.params
+    full = space.full_region()
+    K = space.rig.left.K
+    X = pair.position_mm
+    z = float(X[2])
+    s0 = math.sqrt(pair.left.area / shape.area)
+    ls0 = math.log(s0)
+    q0 = 1000.0 / z
+    if pair.left.elongation > 1.25 and shape.elongation > 1.25:
+        base = pair.left.angle - shape.angle
+        psis = np.array([base, base + math.pi])
+    else:
+        psis = rng.uniform(-math.pi, math.pi, 2)
+    cu = K[0, 0] * X[0] / z + K[0, 2]
+    cv = K[1, 1] * X[1] / z + K[1, 2]
+    r_img = math.sqrt(pair.left.area / math.pi)
+    half_uv = 4.0 + 0.35 * r_img
+    lo = np.array([cu - half_uv - s0 * np.abs(shape.centroid_uv).max(), 0, q0 * (1 - p.window_depth), 0, 0, 0,
+                   ls0 - 0.5 * p.window_scale])
+    hi = np.array([cu + half_uv + s0 * np.abs(shape.centroid_uv).max(), 0, q0 * (1 + p.window_depth), 0, 0, 0,
+                   ls0 + p.window_scale])
+    lo[1] = cv - half_uv - s0 * np.abs(shape.centroid_uv).max()
+    hi[1] = cv + half_uv + s0 * np.abs(shape.centroid_uv).max()
+    lo[3:6], hi[3:6] = full.lo[3:6], full.hi[3:6]
+    lo = np.maximum(lo, full.lo)
+    hi = np.minimum(hi, full.hi)
+    hi = np.maximum(hi, lo + 1e-6)
+    region = Region.box(lo, hi, full.periodic)
+    seeds = region.sample(rng, n)
+    k = np.arange(n)
+    psi = psis[k % 2] + rng.normal(0, 0.15, n)
+    off = np.stack([np.cos(psi) * shape.centroid_uv[0] - np.sin(psi) * shape.centroid_uv[1],
+                    np.sin(psi) * shape.centroid_uv[0] + np.cos(psi) * shape.centroid_uv[1]], 1) * s0
+    seeds[:, 0] = cu - off[:, 0] + rng.normal(0, 1.0, n)
+    seeds[:, 1] = cv - off[:, 1] + rng.normal(0, 1.0, n)
+    seeds[:, 2] = q0 * (1 + rng.normal(0, 0.02, n))
+    seeds[:, 3] = psi
+    tilt = rng.uniform(0, 1, n) ** 0.5 * math.radians(min(p.tilt_max_deg, 35.0))
+    phi = rng.uniform(-math.pi, math.pi, n)
+    tilt[: max(1, n // 4)] = 0.0
+    seeds[:, 4], seeds[:, 5] = tilt * np.cos(phi), tilt * np.sin(phi)
+    # the blob may be a fragment of the creature (foam, glints): scales up to x1.5 are as likely
+    seeds[:, 6] = ls0 + rng.uniform(-0.1, 0.4, n)
+    return region.repair(seeds), region
