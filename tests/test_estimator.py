@@ -160,7 +160,9 @@ def test_detection_needs_both_cameras_and_the_outline(scene):
     R, t, alpha = truth(sc)
     frame = stereo_hue(sc.left, sc.right, CFG.fitness)
     ok = detect(Candidate(R, t, alpha, 0.0, 0, "truth"), model, frame, sc.rig, CFG.fitness, CFG.estimator)
-    assert ok.passed and ok.score >= CFG.estimator.threshold and ok.outer_on_target < 0.05
+    assert ok.passed and ok.contrast >= CFG.estimator.min_contrast and ok.outer_on_target < 0.05
+    assert ok.null_level < ok.score and ok.threshold == pytest.approx(
+        ok.null_level + CFG.estimator.min_contrast * (1 - ok.null_level))
     shrunk = detect(Candidate(R, t, alpha * 1.6, 0.0, 0, "shrunk"), model, frame, sc.rig, CFG.fitness, CFG.estimator)
     assert not shrunk.passed and shrunk.outer_on_target > CFG.estimator.max_outer_on_target
     assert shrunk.confidence < ok.confidence

@@ -773,7 +773,7 @@ def random_scene(seed: int, params: SynthParams, photo_params, kind: str = "squi
                  other_photo: bool = False, effects: tuple[str, ...] = DEFAULT_EFFECTS, empty: bool = False,
                  distractor: bool = False, distance_mm: float | None = None, tilt_deg: float | None = None,
                  photo: np.ndarray | None = None, estimator_photo: np.ndarray | None = None,
-                 rig: Rig | None = None) -> SyntheticScene:
+                 rig: Rig | None = None, split: bool = False) -> SyntheticScene:
     """A seeded test scene for the estimator: a creature lying face-up on water, seen by a rig.
 
     The creature is `photo` (default: the specimen `kind`, seed 0) at a random length in
@@ -788,6 +788,9 @@ def random_scene(seed: int, params: SynthParams, photo_params, kind: str = "squi
     empty: no creature (truth found=false). distractor: add a look-alike (another species, a
     recoloured copy of the creature, or a buoy in the creature's hue) elsewhere in view.
     effects: a subset of EFFECTS, magnitudes from `params`.
+    split: a band of foam across the creature (perpendicular to its longer box side, 10-18 % of
+    that side wide, centred within the middle 40 %), cutting its hue region in two (drawn from a
+    random stream of its own: the rest of the scene is the same as without it).
 
     Ground truth (`truth`, the estimate JSON of DESIGN.md plus extra keys), in the TRUE left
     camera frame, for the photo-model the estimator builds from ITS photo with `photo_params`:
@@ -802,7 +805,7 @@ def random_scene(seed: int, params: SynthParams, photo_params, kind: str = "squi
     box size (mm). With "bend", the truth is the flat model tangent to the bent body at its
     origin; the ends rise towards the camera by params.bend x length.
     Extra keys: distance_mm (depth of the creature's model origin), tilt_deg, same_photo,
-    creature_size_mm, calibration_error, effects, distractors, seed."""
+    creature_size_mm, calibration_error, effects, distractors, split, seed."""
     from photoservo.vision.photo_model import build_photo_model
     from photoservo.sim.specimens import specimen
 
@@ -900,6 +903,19 @@ def random_scene(seed: int, params: SynthParams, photo_params, kind: str = "squi
             q = rng.normal(0, 1.5 * length, 2)
             patches.append([q[0], q[1], rng.uniform(0.05, 0.2) * length])
         foam = Foam(np.array(patches), seed=int(rng.integers(1 << 30)))
+    if split:
+        band_rng = np.random.default_rng([int(seed), 77])
+        w_mm, h_mm = wA / alpha_A, hA / alpha_A
+        long_, short = max(w_mm, h_mm), min(w_mm, h_mm)
+        at = band_rng.uniform(-0.2, 0.2) * long_
+        r = band_rng.uniform(0.05, 0.09) * long_  # patch radius: the band is about 2 r wide
+        band = []
+        for across in np.arange(-0.75 * short, 0.75 * short + 1e-9, 0.8 * r):
+            pm = np.array([at, across, 0.0] if w_mm >= h_mm else [across, at, 0.0])
+            pw = T_world_model[:3, :3] @ pm + T_world_model[:3, 3]
+            band.append([pw[0], pw[1], r])
+        old = np.zeros((0, 3)) if foam is None else foam.patches
+        foam = Foam(np.vstack([old, band]), seed=int(band_rng.integers(1 << 30)) if foam is None else foam.seed)
     scene = Scene(water=water, target=None if empty else target, distractors=tuple(distractors), foam=foam)
     # per-camera effects
     gain = 1 + (rng.uniform(-params.brightness, params.brightness) if "brightness" in fx else 0.0)
@@ -924,6 +940,7 @@ def random_scene(seed: int, params: SynthParams, photo_params, kind: str = "squi
         "calibration_error": calib,
         "effects": sorted(fx),
         "distractors": dinfo,
+        "split": bool(split),
         "seed": int(seed),
     }
     return SyntheticScene(left=left, right=right, rig=rig, rig_true=rig_true, truth=truth, photo=estimator_photo,

@@ -1,4 +1,19 @@
-"""Detection (method step 3's fitness turned into a decision): is a candidate pose the creature?"""
+"""Detection (method step 3's fitness turned into a decision): is a candidate pose the creature?
+
+The fitness a creature scores depends on the images — light, colour cast, shading, highlights,
+foam, how many pixels carry hue at all — so a fixed fitness level calibrated on one renderer
+does not carry to another or to real photos. The decision is made relative to the pair itself:
+`null_scores` places the same model, at the candidate's depth, tilt and scale, at poses in the
+same pair where the candidate is not (off its footprint, any heading), each placement the best
+of a few small jitters (the candidate itself is the best of a search, its null should be the best
+of a little search too). The candidate's `contrast` is how far it stands above that null on the
+way to a perfect score,
+
+    contrast = (S - q) / (1 - q),   S: the candidate's detection score,  q: the null's median,
+
+and found = contrast >= min_contrast, beside the outline check (few outer points on target hue).
+A brighter, darker or colour-cast copy of a pair moves S and q together.
+"""
 
 from __future__ import annotations
 
@@ -9,6 +24,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from photoservo.geometry import rotation_from_heading_tilt
 from photoservo.vision.fitness import OUT_MISMATCH, FitnessParams, StereoHue, counts_reference, fitness
 from photoservo.vision.photo_model import PhotoModel
 from photoservo.vision.pose_search import Candidate
@@ -18,11 +34,42 @@ if TYPE_CHECKING:
     from photoservo.vision.estimator import EstimatorParams
 
 
-def confidence(f: float, params: EstimatorParams) -> float:
-    """Logistic confidence that a candidate of fitness f is the target."""
-    if not np.isfinite(f):
+def confidence(contrast: float, params: EstimatorParams) -> float:
+    """Logistic confidence that a candidate standing `contrast` above its null is the target."""
+    if not np.isfinite(contrast):
         return 0.0
-    return 1.0 / (1.0 + math.exp(-(f - params.threshold) / params.confidence_scale))
+    return 1.0 / (1.0 + math.exp(-(contrast - params.min_contrast) / params.confidence_scale))
+
+
+def null_scores(c: Candidate, model: PhotoModel, frame: StereoHue, rig: Rig, fit_params: FitnessParams,
+                rng: np.random.Generator, placements: int = 40, jitters: int = 6) -> np.ndarray:
+    """Detection scores (fitness, cameras combined by min) of the candidate's model where the
+    candidate is not: `placements` poses at the candidate's depth, tilt and alpha with the model
+    origin at random pixels of the left image at least one apparent model length away from the
+    candidate's, any heading; each the best of `jitters` variants (origin within a fifth of the
+    length, heading +- 20 deg, alpha +- 10 %). Returns (placements,) scores; empty when the image
+    has no room off the candidate."""
+    strict = dataclasses.replace(fit_params, combine="min")
+    K = rig.left.K
+    t = np.asarray(c.position_mm, float)
+    z = float(t[2])
+    u0 = K[0, 0] * t[0] / z + K[0, 2]
+    v0 = K[1, 1] * t[1] / z + K[1, 2]
+    length = K[0, 0] * max(model.size_px) / (c.alpha * z)  # apparent longest side (px)
+    W, H = rig.left.width, rig.left.height
+    m = 0.5 * min(length, 0.8 * min(W, H))
+    uv = rng.uniform([m, m], [max(m + 1, W - m), max(m + 1, H - m)], size=(8 * placements, 2))
+    uv = uv[np.hypot(uv[:, 0] - u0, uv[:, 1] - v0) >= length][:placements]
+    if not len(uv):
+        return np.zeros(0)
+    n = len(uv) * jitters
+    uv = np.repeat(uv, jitters, axis=0) + rng.uniform(-0.2, 0.2, (n, 2)) * length
+    psi = np.repeat(rng.uniform(-math.pi, math.pi, len(uv) // jitters), jitters) + rng.uniform(-0.35, 0.35, n)
+    R = np.asarray(c.R)[None] @ rotation_from_heading_tilt(psi, np.zeros(n), np.zeros(n))
+    pos = np.column_stack([(uv[:, 0] - K[0, 2]) * z / K[0, 0], (uv[:, 1] - K[1, 2]) * z / K[1, 1], np.full(n, z)])
+    alpha = c.alpha * rng.uniform(0.9, 1.1, n)
+    f = fitness(R, pos, alpha, model, frame, rig, strict)
+    return f.reshape(-1, jitters).max(axis=1)
 
 
 @dataclass(frozen=True)
@@ -30,26 +77,38 @@ class Detection:
     """Is a candidate the target? `score`: the stereo fitness with the two cameras combined by
     their minimum (`[fitness] combine = "min"`), so a look-alike seen by one camera only, or a
     pose that fits one image and not the other, cannot pass on the strength of one camera (the GA
-    itself optimises the configured combination). `outer_on_target`: the largest share, over the
-    two cameras, of outer points S_out landing on target hue — the creature's outline must end
-    where the model's does (a buoy or another species of the same colour usually spills over).
-    passed = score >= threshold and outer_on_target <= max_outer_on_target;
-    confidence = logistic((score - threshold) / confidence_scale)
-                 · logistic((max_outer_on_target - outer_on_target) / 0.02)."""
+    itself optimises the configured combination). `null_level`: the median of `null_scores`;
+    `contrast` = (score - null_level) / (1 - null_level) (module docstring). `outer_on_target`:
+    the largest share, over the two cameras, of outer points S_out landing on target hue — the
+    creature's outline must end where the model's does (a buoy or another species of the same
+    colour usually spills over).
+    passed = contrast >= min_contrast and outer_on_target <= max_outer_on_target;
+    confidence = logistic((contrast - min_contrast) / confidence_scale)
+                 · logistic((max_outer_on_target - outer_on_target) / 0.02).
+    `threshold`: the detection score that would just pass in this pair (the tracker's per-frame
+    test)."""
 
     score: float
+    null_level: float
+    contrast: float
     outer_on_target: float
     passed: bool
     confidence: float
+    threshold: float
 
 
 def detect(c: Candidate, model: PhotoModel, frame: StereoHue, rig: Rig, fit_params: FitnessParams,
-           p: EstimatorParams) -> Detection:
-    """The detection test of one candidate (see `Detection`)."""
+           p: EstimatorParams, seed: int = 0) -> Detection:
+    """The detection test of one candidate (see `Detection`); `seed` draws the null placements."""
     strict = dataclasses.replace(fit_params, combine="min")
     score = float(fitness(c.R, c.position_mm, c.alpha, model, frame, rig, strict)[0])
     counts = counts_reference(c.R, c.position_mm, c.alpha, model, frame, rig, fit_params)[0]
     outer = float(counts[:, OUT_MISMATCH].max()) / max(1, len(model.outer_uv))
-    passed = score >= p.threshold and outer <= p.max_outer_on_target
-    conf = confidence(score, p) / (1.0 + math.exp(-(p.max_outer_on_target - outer) / 0.02))
-    return Detection(score=score, outer_on_target=outer, passed=bool(passed), confidence=conf)
+    null = null_scores(c, model, frame, rig, fit_params, np.random.default_rng(seed))
+    q = float(np.median(null)) if len(null) else 0.0
+    q = min(q, 0.99)
+    contrast = (score - q) / (1.0 - q)
+    passed = contrast >= p.min_contrast and outer <= p.max_outer_on_target
+    conf = confidence(contrast, p) / (1.0 + math.exp(-(p.max_outer_on_target - outer) / 0.02))
+    return Detection(score=score, null_level=q, contrast=contrast, outer_on_target=outer, passed=bool(passed),
+                     confidence=conf, threshold=q + p.min_contrast * (1.0 - q))

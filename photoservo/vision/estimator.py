@@ -30,7 +30,7 @@ from photoservo.vision.ga import GAParams
 from photoservo.vision.photo_model import PhotoModel
 from photoservo.vision.pose_search import Candidate, PoseSearch
 from photoservo.vision.rig import Rig
-from photoservo.vision.seeding import ModelShape, match_blobs, seed_genes, target_blobs
+from photoservo.vision.seeding import ModelShape, group_pairs, match_blobs, seed_genes, target_blobs
 
 
 @dataclass(frozen=True)
@@ -51,6 +51,8 @@ class EstimatorParams:
     epipolar_tol_px: float  # blob centroids this far from the epipolar line still pair (px)
     window_depth: float  # seeded window: inverse depth +- this fraction
     window_scale: float  # seeded window: ln s +- this
+    window_grow: float  # seeded window: ln s reaches this far above the blob's (the blob may be a piece)
+    group_reach: float  # blob pairs group when their gap is <= this x the sum of their half-lengths
     plane_refine: bool  # correct the tilt by a stereo plane fit over the inner points (vision/stereo_plane.py)
     plane_fitness_tol: float  # ...accepted when the re-fitted pose's fitness is at most this below the GA's
     min_generations: int  # never stop before this many generations
@@ -60,9 +62,9 @@ class EstimatorParams:
     position_tol_mm: float  # ... best position moved less than this (mm)
     rotation_tol_deg: float  # ... best rotation turned less than this (deg)
     alpha_tol: float  # ... best alpha changed by less than this fraction
-    threshold: float  # detection threshold (found = detection_score >= threshold)
+    min_contrast: float  # detection: found = contrast over the pair's own null >= this (vision/detection.py)
     max_outer_on_target: float  # detection also needs at most this share of outer points on target hue
-    confidence_scale: float  # width of the logistic confidence around the threshold
+    confidence_scale: float  # width of the logistic confidence around min_contrast
 
     def validate(self, where: str) -> None:
         w = f"{where}." if where else ""
@@ -76,6 +78,8 @@ class EstimatorParams:
             ("epipolar_tol_px", self.epipolar_tol_px > 0, "must be > 0"),
             ("window_depth", 0 < self.window_depth < 1, "must be in (0, 1)"),
             ("window_scale", self.window_scale > 0, "must be > 0"),
+            ("window_grow", self.window_grow >= 0, "must be >= 0"),
+            ("group_reach", self.group_reach >= 0, "must be >= 0"),
             ("min_generations", 0 <= self.min_generations <= self.max_generations,
              "need 0 <= min_generations <= max_generations"),
             ("patience", self.patience >= 1, "must be >= 1"),
@@ -104,6 +108,7 @@ class Estimate:
     evaluations: int = 0
     candidates: tuple[dict, ...] = field(default_factory=tuple)
     detection_score: float | None = None
+    contrast: float | None = None  # the best candidate's contrast over the pair's null (vision/detection.py)
 
     def to_json(self, with_candidates: bool = False) -> dict:
         """Exactly the DESIGN.md estimate object (plus `confidence`, `evaluations` and, when asked,
@@ -121,6 +126,7 @@ class Estimate:
             "seconds": round(float(self.seconds), 4),
             "confidence": round(float(self.confidence), 4),
             "detection_score": None if self.detection_score is None else round(float(self.detection_score), 6),
+            "contrast": None if self.contrast is None else round(float(self.contrast), 6),
             "evaluations": int(self.evaluations),
         }
         if with_candidates:
@@ -145,7 +151,9 @@ def estimate(model: PhotoModel, left_bgr: np.ndarray, right_bgr: np.ndarray, rig
     if p.seeding and p.genes == "image":
         bl = target_blobs(frame.left, model.target_hues, p.min_blob_px)
         br = target_blobs(frame.right, model.target_hues, p.min_blob_px)
-        pairs = match_blobs(bl, br, rig, p)[: p.max_candidates]
+        pairs = match_blobs(bl, br, rig, p)
+        # groups of pieces (a creature split by foam) beside the single blobs, largest first
+        pairs = sorted(group_pairs(pairs, p) + pairs, key=lambda bp: -bp.left.area)[: p.max_candidates]
         shape = ModelShape.of(model)
         for i, (pair, s) in enumerate(zip(pairs, ss.spawn(len(pairs)))):
             rng = np.random.default_rng(s)
@@ -168,9 +176,9 @@ def estimate(model: PhotoModel, left_bgr: np.ndarray, right_bgr: np.ndarray, rig
     for (name, search), c in zip(islands, firsts):
         evaluations += search.ga.evaluations
         if np.isfinite(c.fitness):
-            results.append((detect(c, model, frame, rig, fit_params, p),
+            results.append((detect(c, model, frame, rig, fit_params, p, seed=seed),
                             Candidate(c.R, c.position_mm, c.alpha, c.fitness, c.generations, name)))
-    results.sort(key=lambda dc: (-dc[0].passed, -dc[0].score, -dc[1].fitness))
+    results.sort(key=lambda dc: (-dc[0].passed, -dc[0].contrast, -dc[1].fitness))
     cands = tuple(_candidate_json(c, d, model) for d, c in results)
     seconds = time.perf_counter() - t0
     if not results or not results[0][0].passed:
@@ -179,12 +187,12 @@ def estimate(model: PhotoModel, left_bgr: np.ndarray, right_bgr: np.ndarray, rig
                         fitness=None if best is None else float(best.fitness),
                         generations=sum(s.ga.generation for _, s in islands), seconds=seconds,
                         confidence=0.0 if d is None else d.confidence, evaluations=evaluations, candidates=cands,
-                        detection_score=None if d is None else d.score)
+                        detection_score=None if d is None else d.score, contrast=None if d is None else d.contrast)
     d, best = results[0]
     return Estimate(found=True, position_mm=best.position_mm, rotation=best.R, alpha_px_per_mm=best.alpha,
                     size_mm=model.size_mm(best.alpha), fitness=best.fitness, generations=best.generations,
                     seconds=seconds, confidence=d.confidence, evaluations=evaluations,
-                    candidates=cands, detection_score=d.score)
+                    candidates=cands, detection_score=d.score, contrast=d.contrast)
 
 
 def _candidate_json(c: Candidate, d: Detection, model: PhotoModel) -> dict:
@@ -197,6 +205,9 @@ def _candidate_json(c: Candidate, d: Detection, model: PhotoModel) -> dict:
         "fitness": round(float(c.fitness), 6),
         "generations": int(c.generations),
         "detection_score": round(d.score, 6),
+        "null_level": round(d.null_level, 6),
+        "contrast": round(d.contrast, 6),
+        "detection_threshold": round(d.threshold, 6),
         "outer_on_target": round(d.outer_on_target, 4),
         "confidence": round(d.confidence, 4),
         "source": c.source,

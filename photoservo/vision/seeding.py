@@ -28,22 +28,48 @@ if TYPE_CHECKING:
 @dataclass(frozen=True)
 class Blob:
     """A connected region of target hue in one image: centroid (u, v) px, area px, major-axis
-    angle (rad, image x toward y) and elongation (major / minor axis)."""
+    angle (rad, image x toward y), elongation (major / minor axis) and the central second
+    moments per unit area `mu` = (mu20, mu02, mu11) px^2 (what `union` adds up)."""
 
     centroid: np.ndarray
     area: float
     angle: float
     elongation: float
+    mu: tuple[float, float, float] = (0.0, 0.0, 0.0)
+
+    @property
+    def half_length(self) -> float:
+        """Half the major axis of the blob's equivalent ellipse (px)."""
+        return 2.0 * math.sqrt(max(0.5 * (self.mu[0] + self.mu[1]
+                                          + math.hypot(self.mu[0] - self.mu[1], 2 * self.mu[2])), 0.0))
 
 
-def _moments_shape(m: dict) -> tuple[np.ndarray, float, float, float]:
-    a = m["m00"]
-    c = np.array([m["m10"] / a, m["m01"] / a])
-    mu20, mu02, mu11 = m["mu20"] / a, m["mu02"] / a, m["mu11"] / a
+def _shape(c: np.ndarray, a: float, mu20: float, mu02: float, mu11: float) -> Blob:
+    """A Blob from its centroid, area and central second moments per unit area."""
     angle = 0.5 * math.atan2(2 * mu11, mu20 - mu02)
     d = math.sqrt(max(0.0, 4 * mu11 * mu11 + (mu20 - mu02) ** 2))
     l1, l2 = (mu20 + mu02 + d) / 2, (mu20 + mu02 - d) / 2
-    return c, a, angle, math.sqrt(l1 / max(l2, 1e-9))
+    return Blob(centroid=c, area=a, angle=angle, elongation=math.sqrt(l1 / max(l2, 1e-9)), mu=(mu20, mu02, mu11))
+
+
+def _moments_shape(m: dict) -> Blob:
+    a = m["m00"]
+    return _shape(np.array([m["m10"] / a, m["m01"] / a]), a, m["mu20"] / a, m["mu02"] / a, m["mu11"] / a)
+
+
+def union(blobs: list[Blob]) -> Blob:
+    """The blob of several pieces taken together (area, centroid and second moments of the union:
+    the parallel-axis theorem), e.g. a creature cut in two by a foam band."""
+    a = np.array([b.area for b in blobs])
+    c = np.array([b.centroid for b in blobs])
+    A = float(a.sum())
+    cc = (a[:, None] * c).sum(axis=0) / A
+    d = c - cc
+    mu = np.array([b.mu for b in blobs])
+    mu20 = float((a * (mu[:, 0] + d[:, 0] ** 2)).sum() / A)
+    mu02 = float((a * (mu[:, 1] + d[:, 1] ** 2)).sum() / A)
+    mu11 = float((a * (mu[:, 2] + d[:, 0] * d[:, 1])).sum() / A)
+    return _shape(cc, A, mu20, mu02, mu11)
 
 
 def target_blobs(hue: np.ndarray, target_hues: np.ndarray, min_px: int, max_blobs: int = 12,
@@ -62,9 +88,8 @@ def target_blobs(hue: np.ndarray, target_hues: np.ndarray, min_px: int, max_blob
     blobs = []
     for i in order[:max_blobs]:
         x, y, w, h = stats[i, :4]
-        m = cv2.moments((labels[y:y + h, x:x + w] == i).astype(np.uint8), binaryImage=True)
-        c, a, ang, el = _moments_shape(m)
-        blobs.append(Blob(centroid=c + (x, y), area=a, angle=ang, elongation=el))
+        b = _moments_shape(cv2.moments((labels[y:y + h, x:x + w] == i).astype(np.uint8), binaryImage=True))
+        blobs.append(Blob(b.centroid + (x, y), b.area, b.angle, b.elongation, b.mu))
     return blobs
 
 
@@ -117,6 +142,43 @@ def match_blobs(left: list[Blob], right: list[Blob], rig: Rig, params: Estimator
     return pairs
 
 
+def group_pairs(pairs: list[BlobPair], params: EstimatorParams) -> list[BlobPair]:
+    """Stereo-consistent groups of nearby blob pairs, each as one pair of `union` blobs: the
+    pieces of one creature that foam, a glint or a wave crest cut apart. Two pairs are near when
+    their triangulated depths agree within `window_depth` and, in both images, the gap between
+    their centroids is at most `group_reach` times the sum of their half-lengths. Groups of two
+    or more (connected components of "near"), largest total area first; the position is the
+    area-weighted mean of the members'."""
+    n = len(pairs)
+    near = np.eye(n, dtype=bool)
+    for i in range(n):
+        for j in range(i + 1, n):
+            a, b = pairs[i], pairs[j]
+            za, zb = float(a.position_mm[2]), float(b.position_mm[2])
+            ok = abs(za - zb) <= params.window_depth * min(za, zb)
+            for ba, bb in ((a.left, b.left), (a.right, b.right)):
+                reach = params.group_reach * (ba.half_length + bb.half_length)
+                ok &= float(np.linalg.norm(ba.centroid - bb.centroid)) <= reach
+            near[i, j] = near[j, i] = ok
+    label = list(range(n))
+    for i in range(n):  # connected components (n is small)
+        for j in range(n):
+            if near[i, j] and label[j] != label[i]:
+                old, new = max(label[i], label[j]), min(label[i], label[j])
+                label = [new if x == old else x for x in label]
+    groups = []
+    for g in sorted(set(label)):
+        members = [pairs[k] for k in range(n) if label[k] == g]
+        if len(members) < 2:
+            continue
+        w = np.array([m.left.area for m in members])
+        pos = (w[:, None] * np.array([m.position_mm for m in members])).sum(axis=0) / w.sum()
+        groups.append(BlobPair(position_mm=pos, left=union([m.left for m in members]),
+                               right=union([m.right for m in members]),
+                               residual_px=max(m.residual_px for m in members)))
+    return sorted(groups, key=lambda gp: -gp.left.area)
+
+
 @dataclass(frozen=True)
 class ModelShape:
     """Area (photo px), centroid offset from the model origin (px) and principal axis of the
@@ -129,9 +191,9 @@ class ModelShape:
 
     @staticmethod
     def of(model: PhotoModel) -> ModelShape:
-        m = cv2.moments((np.asarray(model.mask) > 0).astype(np.uint8), binaryImage=True)
-        c, a, ang, el = _moments_shape(m)
-        return ModelShape(area=a, centroid_uv=c - np.asarray(model.origin_px), angle=ang, elongation=el)
+        b = _moments_shape(cv2.moments((np.asarray(model.mask) > 0).astype(np.uint8), binaryImage=True))
+        return ModelShape(area=b.area, centroid_uv=b.centroid - np.asarray(model.origin_px), angle=b.angle,
+                          elongation=b.elongation)
 
 
 def seed_genes(pair: BlobPair, shape: ModelShape, space: GeneSpace, rng: np.random.Generator,
@@ -141,7 +203,12 @@ def seed_genes(pair: BlobPair, shape: ModelShape, space: GeneSpace, rng: np.rand
     Apparent scale s from the blob area (s^2 = area_blob / area_model; a tilt shrinks the blob,
     so the window reaches further up than down), headings psi from the difference of principal
     axes (two hypotheses, 180 deg apart; random when either shape is nearly round), origin = blob
-    centroid minus the rotated, scaled centroid offset of the photo mask."""
+    centroid minus the rotated, scaled centroid offset of the photo mask.
+
+    The blob may be a piece of the creature (foam, a glint or a wave crest over the rest): the
+    window reaches `window_grow` above the blob's ln s, and wide enough in (u, v) for a model that
+    large to hold the piece anywhere inside it; a third of the seeds are such grown models, each
+    placed with the piece at a random point of its photo mask."""
     p = space.params
     full = space.full_region()
     K = space.rig.left.K
@@ -158,13 +225,11 @@ def seed_genes(pair: BlobPair, shape: ModelShape, space: GeneSpace, rng: np.rand
     cu = K[0, 0] * X[0] / z + K[0, 2]
     cv = K[1, 1] * X[1] / z + K[1, 2]
     r_img = math.sqrt(pair.left.area / math.pi)
-    half_uv = 4.0 + 0.35 * r_img
-    lo = np.array([cu - half_uv - s0 * np.abs(shape.centroid_uv).max(), 0, q0 * (1 - p.window_depth), 0, 0, 0,
-                   ls0 - 0.5 * p.window_scale])
-    hi = np.array([cu + half_uv + s0 * np.abs(shape.centroid_uv).max(), 0, q0 * (1 + p.window_depth), 0, 0, 0,
-                   ls0 + p.window_scale])
-    lo[1] = cv - half_uv - s0 * np.abs(shape.centroid_uv).max()
-    hi[1] = cv + half_uv + s0 * np.abs(shape.centroid_uv).max()
+    ls_hi = ls0 + max(p.window_scale, p.window_grow)
+    half_uv = max(4.0 + 0.35 * r_img + s0 * np.abs(shape.centroid_uv).max(),
+                  0.5 * math.exp(ls_hi) * max(space.model.size_px))
+    lo = np.array([cu - half_uv, cv - half_uv, q0 * (1 - p.window_depth), 0, 0, 0, ls0 - 0.5 * p.window_scale])
+    hi = np.array([cu + half_uv, cv + half_uv, q0 * (1 + p.window_depth), 0, 0, 0, ls_hi])
     lo[3:6], hi[3:6] = full.lo[3:6], full.hi[3:6]
     lo = np.maximum(lo, full.lo)
     hi = np.minimum(hi, full.hi)
@@ -185,4 +250,16 @@ def seed_genes(pair: BlobPair, shape: ModelShape, space: GeneSpace, rng: np.rand
     seeds[:, 4], seeds[:, 5] = tilt * np.cos(phi), tilt * np.sin(phi)
     # the blob may be a fragment of the creature (foam, glints): scales up to x1.5 are as likely
     seeds[:, 6] = ls0 + rng.uniform(-0.1, 0.4, n)
+    # a third grown: a larger model holding the piece's centroid at a random point of its mask
+    g = k[k % 3 == 2]
+    if p.window_grow > 0 and len(g):
+        ls = ls0 + rng.uniform(0.2, p.window_grow, len(g))
+        ys, xs = np.nonzero(space.model.mask)
+        pick = rng.integers(len(xs), size=len(g))
+        at = np.column_stack([xs[pick], ys[pick]]) - np.asarray(space.model.origin_px)  # photo px from origin
+        c, s_ = np.cos(psi[g]), np.sin(psi[g])
+        e = np.exp(ls)
+        seeds[g, 0] = cu - e * (c * at[:, 0] - s_ * at[:, 1])
+        seeds[g, 1] = cv - e * (s_ * at[:, 0] + c * at[:, 1])
+        seeds[g, 6] = ls
     return region.repair(seeds), region

@@ -8,7 +8,9 @@ time gives a search window, and a few GA generations run within a time budget. T
 back to the base frame and updates an alpha-beta filter (position, velocity) and a smoothed
 alpha (the creature's size does not change).
 
-Lost and re-acquisition: a frame whose best fitness is under the detection threshold is a miss;
+Lost and re-acquisition: a frame whose best fitness is under the detection threshold is a miss
+(the fitness level that passed the estimator's image-relative detection at the last acquisition,
+`detection_threshold` of the chosen candidate: vision/detection.py);
 after `lost_frames` misses in a row the track is lost and the next frames run the full
 acquisition (`estimator.estimate`, blobs matched along epipolar lines). Among its candidates
 above the threshold the tracker takes, when it had a track before, the one whose size agrees
@@ -127,6 +129,7 @@ class Tracker:
         self.t_last: float | None = None
         self.T_base_left_last: np.ndarray | None = None
         self.acquisitions = 0
+        self.threshold = math.inf  # fitness that counts as found: set by each acquisition
         self.time_budget = time_budget  # False: always run generations_per_frame (deterministic)
 
     @classmethod
@@ -171,7 +174,7 @@ class Tracker:
         measured = None
         if cand is not None:
             R_l, t_l, alpha_m, f, _ = cand
-            if f >= self.est_params.threshold:
+            if f >= self.threshold:
                 T_bm = T_base_left @ make_pose(R_l, t_l)
                 if self._plausible(T_bm[:3, 3], t):
                     measured = (R_l, t_l, alpha_m, f, T_bm)
@@ -235,6 +238,7 @@ class Tracker:
                        self.fit_params, seed=seed, frame=frame)
         cands = [c for c in est.candidates if c["found"]]  # passed the estimator's detection tests
         if not cands:
+            self.threshold = math.inf  # nothing passed: not found
             best = est.candidates[0] if est.candidates else None
             if best is None:
                 return None
@@ -251,6 +255,7 @@ class Tracker:
         else:
             chosen = cands[0]
         R, tl, a = np.array(chosen["rotation"]), np.array(chosen["position_mm"]), float(chosen["alpha_px_per_mm"])
+        self.threshold = float(chosen["detection_threshold"])
         self.search = PoseSearch(self.model, self.rig, frame, self.ga_params, self.est_params,
                                  self.fit_params, self.rng)
         self._window(R, tl, a)
