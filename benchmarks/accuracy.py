@@ -58,6 +58,7 @@ from photoservo.vision.fitness import stereo_hue
 from photoservo.vision.ga import paper_params
 from photoservo.vision.photo_model import build_photo_model
 from photoservo.geometry import heading_tilt_error
+from photoservo.sim import harbour
 from photoservo.sim.renderer import EFFECTS, random_scene
 
 KINDS = ("squid", "crab", "fish")
@@ -65,9 +66,18 @@ SUCCESS_POS_FRAC = 0.05
 
 
 def make_scene(i: int, cfg, empty: bool = False, distractor: bool = False, other: bool = False,
-               split: bool = False):
-    sc = random_scene(1000 + i, cfg.synthetic, cfg.photo_model, kind=KINDS[i % 3], other_photo=other,
-                      effects=tuple(EFFECTS), empty=empty, distractor=distractor, split=split)
+               split: bool = False, generator: str = "renderer", many_hued: bool = False):
+    """Scene i of the benchmark from `generator`: "renderer" (sim/renderer.py, every effect on) or
+    "harbour" (sim/harbour.py, the second, independent generator)."""
+    kind = "fish" if many_hued else KINDS[i % 3]
+    if generator == "harbour":
+        sc = harbour.random_scene(1000 + i, cfg.synthetic, cfg.photo_model, kind=kind, other_photo=other,
+                                  empty=empty, distractor=distractor, foam_split=split, many_hued=many_hued)
+    else:
+        if many_hued:
+            raise ValueError("many-hued creatures come from the harbour generator")
+        sc = random_scene(1000 + i, cfg.synthetic, cfg.photo_model, kind=kind, other_photo=other,
+                          effects=tuple(EFFECTS), empty=empty, distractor=distractor, split=split)
     return sc, build_photo_model(sc.photo, cfg.photo_model)
 
 
@@ -201,9 +211,15 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--scenes", type=int, default=60, help="target scenes (default 60)")
     ap.add_argument("--nulls", type=int, default=50, help="null scenes: half empty, half look-alike (default 50)")
     ap.add_argument("--baseline", type=int, default=12, help="scenes for the paper / unseeded rows (default 12)")
+    ap.add_argument("--generator", choices=("renderer", "harbour"), default="renderer",
+                    help="scene generator: sim/renderer.py (default) or the independent sim/harbour.py")
+    ap.add_argument("--many-hued", type=int, default=0, metavar="N",
+                    help="N extra scenes of the harbour generator's many-hued fish (its hues include the water's)")
     ap.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE")
-    ap.add_argument("--out", default=str(Path(__file__).parent / "out" / "accuracy.json"))
+    ap.add_argument("--out", default=None, help="JSON (default benchmarks/out/accuracy[_harbour].json)")
     a = ap.parse_args(argv)
+    if a.out is None:
+        a.out = str(Path(__file__).parent / "out" / f"accuracy{'_harbour' if a.generator == 'harbour' else ''}.json")
     if a.quick:
         a.scenes, a.nulls, a.baseline = 12, 8, 4
     cfg = load_config(None, a.overrides)
@@ -211,13 +227,13 @@ def main(argv: list[str] | None = None) -> int:
     print(f"accuracy benchmark: {a.scenes} target scenes, {a.nulls} null scenes; load average "
           f"{load[0]:.1f} on {os.cpu_count()} cores (shared machine: wall times are medians under load)", flush=True)
     # warm-up (JIT)
-    sc, model = make_scene(0, cfg)
+    sc, model = make_scene(0, cfg, generator=a.generator)
     estimate(model, sc.left, sc.right, sc.rig, cfg.ga, cfg.estimator, cfg.fitness, seed=0)
 
     rows, scenes = [], []
     for i in range(a.scenes):
         other = i % 2 == 1
-        sc, model = make_scene(i, cfg, other=other, distractor=i % 4 == 3, split=is_split(i))
+        sc, model = make_scene(i, cfg, other=other, distractor=i % 4 == 3, split=is_split(i), generator=a.generator)
         scenes.append((sc, model))
         est, cpu = timed(estimate, model, sc.left, sc.right, sc.rig, cfg.ga, cfg.estimator, cfg.fitness, seed=i)
         r = errors(est, sc.truth, cpu)
@@ -233,10 +249,20 @@ def main(argv: list[str] | None = None) -> int:
               f"pos {r['pos_pct']:.2f}% depth {r['depth_pct']:.2f}% head {r['heading_deg']:.1f} tilt {r['tilt_deg']:.1f} "
               f"size {r['size_pct']:.1f}% gens {r['generations']} {r['seconds']:.2f}s", flush=True)
 
+    many = []
+    for k in range(a.many_hued):
+        sc, model = make_scene(700 + k, cfg, generator="harbour", many_hued=True)
+        est, cpu = timed(estimate, model, sc.left, sc.right, sc.rig, cfg.ga, cfg.estimator, cfg.fitness, seed=k)
+        r = errors(est, sc.truth, cpu)
+        r.update(seed=1700 + k, kind="fish", many_hued=True, distractor=False, split=False)
+        many.append(r)
+        print(f"  many-hued {k:3d} z {r['distance_mm']:6.0f}: {'found' if r['found'] else 'MISSED'} "
+              f"pos {r['pos_pct']:.2f}% size {r['size_pct']:.1f}% {r['seconds']:.2f}s", flush=True)
+
     nulls = []
     for j in range(a.nulls):
         distractor = j % 2 == 1
-        sc, model = make_scene(500 + j, cfg, empty=True, distractor=distractor)
+        sc, model = make_scene(500 + j, cfg, empty=True, distractor=distractor, generator=a.generator)
         est = estimate(model, sc.left, sc.right, sc.rig, cfg.ga, cfg.estimator, cfg.fitness, seed=j)
         nulls.append({"seed": 1500 + j, "look_alike": distractor, "found": bool(est.found),
                       "fitness": est.fitness, "detection_score": est.detection_score, "contrast": est.contrast,
@@ -272,6 +298,8 @@ def main(argv: list[str] | None = None) -> int:
         "default, with a look-alike in view": summary([r for r in rows if r["distractor"]], maxg),
         "default, foam band splitting the creature": summary([r for r in rows if r["split"]], maxg),
     }
+    if many:
+        table["many-hued fish (harbour generator)"] = summary(many, maxg)
     n_base = min(a.baseline, len(scenes))
     table[f"default, first {n_base} scenes"] = summary(rows[:n_base], maxg)
     for name, br in baseline_rows.items():
@@ -351,7 +379,7 @@ def main(argv: list[str] | None = None) -> int:
                                              "note": "shared, loaded machine: wall times are medians under load"},
         "config": {"ga": dataclasses.asdict(cfg.ga), "estimator": dataclasses.asdict(cfg.estimator)},
         "targets": targets, "table": table, "false_positives": fp, "calibration": calib,
-        "scenes": rows, "nulls": nulls, "baselines": baseline_rows,
+        "generator": a.generator, "scenes": rows, "many_hued": many, "nulls": nulls, "baselines": baseline_rows,
         "python": sys.version.split()[0],
     }
     write_text_atomic(a.out, json.dumps(finite(out), indent=1))

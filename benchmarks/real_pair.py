@@ -38,7 +38,8 @@ import numpy as np
 from photoservo.config import load_config
 from photoservo.fileio import write_text_atomic
 from photoservo.sim.middlebury import real_cases
-from photoservo.vision.estimator import GeneSpace, PoseSearch, estimate
+from photoservo.vision.estimator import estimate
+from photoservo.vision.pose_search import GeneSpace, PoseSearch
 from photoservo.vision.fitness import fitness, stereo_hue
 from photoservo.vision.rig import project_points
 

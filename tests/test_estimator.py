@@ -47,7 +47,10 @@ def test_finds_the_creature_from_the_default_volume(scene):
     js = est.to_json()
     assert set(js) >= {"found", "position_mm", "rotation", "alpha_px_per_mm", "size_mm", "fitness",
                        "generations", "seconds"}
-    assert js["size_mm"] == pytest.approx(list(model.size_mm(est.alpha_px_per_mm)))
+    ax, ay = js["alpha_xy_px_per_mm"]
+    assert js["size_mm"] == pytest.approx([model.size_px[0] / ax, model.size_px[1] / ay])
+    assert ax * ay == pytest.approx(est.alpha_px_per_mm**2)  # alpha: the geometric mean of the two axes
+    assert abs(ax / ay - 1) < 0.06  # the same photo: nearly the same ratio along both axes
 
 
 def test_same_seed_same_estimate(scene):

@@ -27,7 +27,7 @@ import numpy as np
 from photoservo.geometry import rotation_from_heading_tilt
 from photoservo.vision.fitness import OUT_MISMATCH, FitnessParams, StereoHue, counts_reference, fitness
 from photoservo.vision.photo_model import PhotoModel
-from photoservo.vision.pose_search import Candidate
+from photoservo.vision.pose_search import Candidate, aspect_map
 from photoservo.vision.rig import Rig
 
 if TYPE_CHECKING:
@@ -66,6 +66,7 @@ def null_scores(c: Candidate, model: PhotoModel, frame: StereoHue, rig: Rig, fit
     uv = np.repeat(uv, jitters, axis=0) + rng.uniform(-0.2, 0.2, (n, 2)) * length
     psi = np.repeat(rng.uniform(-math.pi, math.pi, len(uv) // jitters), jitters) + rng.uniform(-0.35, 0.35, n)
     R = np.asarray(c.R)[None] @ rotation_from_heading_tilt(psi, np.zeros(n), np.zeros(n))
+    R = aspect_map(R, np.full(n, c.aspect))
     pos = np.column_stack([(uv[:, 0] - K[0, 2]) * z / K[0, 0], (uv[:, 1] - K[1, 2]) * z / K[1, 1], np.full(n, z)])
     alpha = c.alpha * rng.uniform(0.9, 1.1, n)
     f = fitness(R, pos, alpha, model, frame, rig, strict)
@@ -101,8 +102,8 @@ def detect(c: Candidate, model: PhotoModel, frame: StereoHue, rig: Rig, fit_para
            p: EstimatorParams, seed: int = 0) -> Detection:
     """The detection test of one candidate (see `Detection`); `seed` draws the null placements."""
     strict = dataclasses.replace(fit_params, combine="min")
-    score = float(fitness(c.R, c.position_mm, c.alpha, model, frame, rig, strict)[0])
-    counts = counts_reference(c.R, c.position_mm, c.alpha, model, frame, rig, fit_params)[0]
+    score = float(fitness(c.R_model, c.position_mm, c.alpha, model, frame, rig, strict)[0])
+    counts = counts_reference(c.R_model, c.position_mm, c.alpha, model, frame, rig, fit_params)[0]
     outer = float(counts[:, OUT_MISMATCH].max()) / max(1, len(model.outer_uv))
     null = null_scores(c, model, frame, rig, fit_params, np.random.default_rng(seed))
     q = float(np.median(null)) if len(null) else 0.0

@@ -17,6 +17,7 @@ candidate is the estimate, the others the candidate list, and `found` is whether
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from dataclasses import dataclass, field
 from typing import Literal
@@ -55,6 +56,8 @@ class EstimatorParams:
     group_reach: float  # blob pairs group when their gap is <= this x the sum of their half-lengths
     plane_refine: bool  # correct the tilt by a stereo plane fit over the inner points (vision/stereo_plane.py)
     plane_fitness_tol: float  # ...accepted when the re-fitted pose's fitness is at most this below the GA's
+    aspect_max: float  # per-axis size: photo columns vs rows scaled apart by at most this factor (1 = off)
+    aspect_min_gain: float  # ...taken when the fitness rises by at least this
     min_generations: int  # never stop before this many generations
     max_generations: int  # always stop after this many generations
     patience: int  # converged: no improvement beyond the tolerances for this many generations
@@ -79,6 +82,7 @@ class EstimatorParams:
             ("window_depth", 0 < self.window_depth < 1, "must be in (0, 1)"),
             ("window_scale", self.window_scale > 0, "must be > 0"),
             ("window_grow", self.window_grow >= 0, "must be >= 0"),
+            ("aspect_max", self.aspect_max >= 1.0, "must be >= 1"),
             ("group_reach", self.group_reach >= 0, "must be >= 0"),
             ("min_generations", 0 <= self.min_generations <= self.max_generations,
              "need 0 <= min_generations <= max_generations"),
@@ -109,6 +113,7 @@ class Estimate:
     candidates: tuple[dict, ...] = field(default_factory=tuple)
     detection_score: float | None = None
     contrast: float | None = None  # the best candidate's contrast over the pair's null (vision/detection.py)
+    alpha_xy_px_per_mm: tuple[float, float] | None = None  # per photo axis (Candidate.alpha_xy)
 
     def to_json(self, with_candidates: bool = False) -> dict:
         """Exactly the DESIGN.md estimate object (plus `confidence`, `evaluations` and, when asked,
@@ -120,6 +125,7 @@ class Estimate:
             "position_mm": lst(self.position_mm),
             "rotation": None if self.rotation is None else [lst(r) for r in np.asarray(self.rotation)],
             "alpha_px_per_mm": None if self.alpha_px_per_mm is None else float(self.alpha_px_per_mm),
+            "alpha_xy_px_per_mm": lst(self.alpha_xy_px_per_mm),
             "size_mm": lst(self.size_mm),
             "fitness": None if self.fitness is None else round(float(self.fitness), 6),
             "generations": int(self.generations),
@@ -173,11 +179,14 @@ def estimate(model: PhotoModel, left_bgr: np.ndarray, right_bgr: np.ndarray, rig
     firsts[lead] = islands[lead][1].resolve_twins(firsts[lead])
     if p.plane_refine and np.isfinite(firsts[lead].fitness):
         firsts[lead] = islands[lead][1].refine_tilt(firsts[lead], left_bgr, right_bgr)
+    if p.aspect_max > 1.0 and np.isfinite(firsts[lead].fitness):
+        c = islands[lead][1].refine_aspect(firsts[lead], p.aspect_max)
+        if c.fitness >= firsts[lead].fitness + p.aspect_min_gain:
+            firsts[lead] = c
     for (name, search), c in zip(islands, firsts):
         evaluations += search.ga.evaluations
         if np.isfinite(c.fitness):
-            results.append((detect(c, model, frame, rig, fit_params, p, seed=seed),
-                            Candidate(c.R, c.position_mm, c.alpha, c.fitness, c.generations, name)))
+            results.append((detect(c, model, frame, rig, fit_params, p, seed=seed), dataclasses.replace(c, source=name)))
     results.sort(key=lambda dc: (-dc[0].passed, -dc[0].contrast, -dc[1].fitness))
     cands = tuple(_candidate_json(c, d, model) for d, c in results)
     seconds = time.perf_counter() - t0
@@ -190,9 +199,17 @@ def estimate(model: PhotoModel, left_bgr: np.ndarray, right_bgr: np.ndarray, rig
                         detection_score=None if d is None else d.score, contrast=None if d is None else d.contrast)
     d, best = results[0]
     return Estimate(found=True, position_mm=best.position_mm, rotation=best.R, alpha_px_per_mm=best.alpha,
-                    size_mm=model.size_mm(best.alpha), fitness=best.fitness, generations=best.generations,
+                    size_mm=box_size_mm(model, best), alpha_xy_px_per_mm=best.alpha_xy, fitness=best.fitness,
+                    generations=best.generations,
                     seconds=seconds, confidence=d.confidence, evaluations=evaluations,
                     candidates=cands, detection_score=d.score, contrast=d.contrast)
+
+
+def box_size_mm(model: PhotoModel, c: Candidate) -> tuple[float, float]:
+    """Real size (mm) of the candidate's model box: width along model x at alpha_x, height along
+    model y at alpha_y (`Candidate.alpha_xy`)."""
+    ax, ay = c.alpha_xy
+    return (model.size_px[0] / ax, model.size_px[1] / ay)
 
 
 def _candidate_json(c: Candidate, d: Detection, model: PhotoModel) -> dict:
@@ -201,7 +218,8 @@ def _candidate_json(c: Candidate, d: Detection, model: PhotoModel) -> dict:
         "position_mm": [float(x) for x in c.position_mm],
         "rotation": [[float(x) for x in r] for r in c.R],
         "alpha_px_per_mm": float(c.alpha),
-        "size_mm": [float(x) for x in model.size_mm(c.alpha)],
+        "alpha_xy_px_per_mm": [float(x) for x in c.alpha_xy],
+        "size_mm": [float(x) for x in box_size_mm(model, c)],
         "fitness": round(float(c.fitness), 6),
         "generations": int(c.generations),
         "detection_score": round(d.score, 6),

@@ -213,7 +213,10 @@ class Convergence:
 
 @dataclass(frozen=True)
 class Candidate:
-    """One candidate pose: model in the left camera frame, R (3,3), position (3,) mm, alpha px/mm."""
+    """One candidate pose: model in the left camera frame, R (3,3), position (3,) mm, alpha px/mm,
+    and `aspect` k: the photo's two axes scaled apart (the "variable photo-model" for another
+    individual's photo), a model point (u, v) px at (k u / alpha, v / (k alpha), 0) mm, i.e.
+    alpha_x = alpha / k and alpha_y = alpha k (alpha stays their geometric mean)."""
 
     R: np.ndarray
     position_mm: np.ndarray
@@ -221,6 +224,28 @@ class Candidate:
     fitness: float
     generations: int
     source: str  # "blob 0", "blob 1", ..., "global"
+    aspect: float = 1.0
+
+    @property
+    def alpha_xy(self) -> tuple[float, float]:
+        """(alpha_x, alpha_y) px/mm along the photo's columns and rows."""
+        return (self.alpha / self.aspect, self.alpha * self.aspect)
+
+    @property
+    def R_model(self) -> np.ndarray:
+        """The linear part of the model-plane map handed to the fitness: R · diag(k, 1/k, 1), so
+        that (R_model · (u/alpha, v/alpha, 0) + t) places the per-axis model (the kernel is
+        unchanged: its R need not be a rotation)."""
+        return aspect_map(self.R, np.array([self.aspect]))[0]
+
+
+def aspect_map(R: np.ndarray, k: np.ndarray) -> np.ndarray:
+    """R (P,3,3) or (3,3) with column 0 scaled by k and column 1 by 1/k, k (P,): see
+    `Candidate.R_model`."""
+    R = np.array(R, dtype=np.float64).reshape(-1, 3, 3)
+    R[:, :, 0] *= k[:, None]
+    R[:, :, 1] /= k[:, None]
+    return R
 
 
 class PoseSearch:
@@ -309,6 +334,43 @@ class PoseSearch:
         self.ga.evaluations += sub.ga.evaluations
         self.ga.generation += c.generations
         return c
+
+    def refine_aspect(self, best: Candidate, aspect_max: float) -> Candidate:
+        """Per-axis size (the variable photo-model's alpha_x, alpha_y): a short GA of its own over
+        the 7 pose genes in a narrow window around `best` plus an 8th, ln k in +- ln aspect_max,
+        the photo's columns scaled by k and its rows by 1/k (`Candidate.aspect`). Returns the best
+        of that search (its work counted in this search's generations and evaluations)."""
+        p = self.est_params
+        short = dataclasses.replace(p, min_generations=max(1, p.patience // 2), patience=max(2, p.patience // 2),
+                                    max_generations=max(p.patience, p.max_generations // 4))
+        z = float(best.position_mm[2])
+        win = self.space.window(best.R, best.position_mm, best.alpha, position_mm=0.02 * z, heading_deg=5.0,
+                                tilt_deg=8.0, alpha_frac=0.12)
+        b = math.log(aspect_max)
+        region = Region.box(np.append(win.lo, -b), np.append(win.hi, b), np.append(win.periodic, False))
+
+        def f(g: np.ndarray) -> np.ndarray:
+            R, t, alpha, valid = self.space.decode(g[:, :7])
+            out = np.full(len(g), -np.inf)
+            if np.any(valid):
+                Rk = aspect_map(R[valid], np.exp(0.5 * g[valid, 7]))
+                out[valid] = fitness(Rk, t[valid], alpha[valid], self.model, self.frame, self.rig, self.fit_params)
+            return out
+
+        g0 = np.append(self.space.encode(best.R, best.position_mm, best.alpha)[0], math.log(best.aspect) * 2.0)
+        ga = GA(f, region, self.ga.params, self.ga.rng, seeds=g0[None])
+        conv = Convergence(short)
+        for _ in range(short.max_generations):
+            g, fit = ga.step(1)
+            R, t, alpha, _ = self.space.decode(g[None, :7])
+            if conv.update(fit, R[0], t[0], float(alpha[0])):
+                break
+        g, fit = ga.best()
+        R, t, alpha, _ = self.space.decode(g[None, :7])
+        self.ga.evaluations += ga.evaluations
+        self.ga.generation += ga.generation
+        return Candidate(R[0], t[0], float(alpha[0]), fit, self.ga.generation, best.source,
+                         aspect=float(math.exp(0.5 * g[7])))
 
     def resolve_twins(self, best: Candidate) -> Candidate:
         """Try the look-alike twins of a converged pose (`alternatives`), each by a short GA in a
