@@ -93,3 +93,28 @@ def test_detection_unchanged_on_brighter_darker_colour_cast_copies(seed, kind, e
         if e.found:  # and it is the creature (within 5 % of the distance: the benchmark's success)
             t = np.array(sc.truth["position_mm"])
             assert np.linalg.norm(e.position_mm - t) < 0.05 * t[2], name
+
+
+def test_hue_shares_soft_bins_sum_to_one():
+    from photoservo.vision.hue_layout import BINS, hue_shares
+
+    s = hue_shares(np.array([0, 5, 10, 95, 179, 255]))  # 255: no hue, ignored
+    assert s.shape == (BINS,) and s.sum() == pytest.approx(1.0)
+    assert s[0] + s[BINS - 1] > 0.3  # hue 0 and 179 sit between the first and last bin (circular)
+
+
+def test_many_hued_creature_with_the_waters_hue_is_found():
+    """The harbour generator's many-hued fish (its hues run through the water's): target-hue blobs
+    would cover the water; seeds come from the hue layout (vision/hue_layout.py) and the outline
+    test counts only outer points on target hue beyond the pair's own background."""
+    from photoservo.sim import harbour
+
+    sc = harbour.random_scene(1703, CFG.synthetic, CFG.photo_model, kind="fish", many_hued=True)
+    model = build_photo_model(sc.photo, CFG.photo_model)
+    frame = stereo_hue(sc.left, sc.right, CFG.fitness)
+    hued = frame.left[frame.left < 180]
+    assert model.target_hues[hued].mean() > 0.9  # the creature's hues are everywhere in the image
+    est = estimate(model, sc.left, sc.right, sc.rig, CFG.ga, CFG.estimator, CFG.fitness, seed=3)
+    assert est.found
+    t = np.array(sc.truth["position_mm"])
+    assert np.linalg.norm(est.position_mm - t) < 0.05 * t[2]

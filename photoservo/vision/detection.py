@@ -25,7 +25,14 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from photoservo.geometry import rotation_from_heading_tilt
-from photoservo.vision.fitness import OUT_MISMATCH, FitnessParams, StereoHue, counts_reference, fitness
+from photoservo.vision.fitness import (
+    OUT_MISMATCH,
+    FitnessParams,
+    StereoHue,
+    counts_compiled,
+    counts_reference,
+    fitness,
+)
 from photoservo.vision.photo_model import PhotoModel
 from photoservo.vision.pose_search import Candidate, aspect_map
 from photoservo.vision.rig import Rig
@@ -42,13 +49,14 @@ def confidence(contrast: float, params: EstimatorParams) -> float:
 
 
 def null_scores(c: Candidate, model: PhotoModel, frame: StereoHue, rig: Rig, fit_params: FitnessParams,
-                rng: np.random.Generator, placements: int = 40, jitters: int = 6) -> np.ndarray:
+                rng: np.random.Generator, placements: int = 40, jitters: int = 6) -> tuple[np.ndarray, np.ndarray]:
     """Detection scores (fitness, cameras combined by min) of the candidate's model where the
     candidate is not: `placements` poses at the candidate's depth, tilt and alpha with the model
     origin at random pixels of the left image at least one apparent model length away from the
     candidate's, any heading; each the best of `jitters` variants (origin within a fifth of the
-    length, heading +- 20 deg, alpha +- 10 %). Returns (placements,) scores; empty when the image
-    has no room off the candidate."""
+    length, heading +- 20 deg, alpha +- 10 %). Returns the (placements,) scores and the shares of
+    outer points on target hue at every variant (`outer_share`); empty when the image has no room
+    off the candidate."""
     strict = dataclasses.replace(fit_params, combine="min")
     K = rig.left.K
     t = np.asarray(c.position_mm, float)
@@ -61,7 +69,7 @@ def null_scores(c: Candidate, model: PhotoModel, frame: StereoHue, rig: Rig, fit
     uv = rng.uniform([m, m], [max(m + 1, W - m), max(m + 1, H - m)], size=(8 * placements, 2))
     uv = uv[np.hypot(uv[:, 0] - u0, uv[:, 1] - v0) >= length][:placements]
     if not len(uv):
-        return np.zeros(0)
+        return np.zeros(0), np.zeros(0)
     n = len(uv) * jitters
     uv = np.repeat(uv, jitters, axis=0) + rng.uniform(-0.2, 0.2, (n, 2)) * length
     psi = np.repeat(rng.uniform(-math.pi, math.pi, len(uv) // jitters), jitters) + rng.uniform(-0.35, 0.35, n)
@@ -70,7 +78,15 @@ def null_scores(c: Candidate, model: PhotoModel, frame: StereoHue, rig: Rig, fit
     pos = np.column_stack([(uv[:, 0] - K[0, 2]) * z / K[0, 0], (uv[:, 1] - K[1, 2]) * z / K[1, 1], np.full(n, z)])
     alpha = c.alpha * rng.uniform(0.9, 1.1, n)
     f = fitness(R, pos, alpha, model, frame, rig, strict)
-    return f.reshape(-1, jitters).max(axis=1)
+    return f.reshape(-1, jitters).max(axis=1), outer_share(R, pos, alpha, model, frame, rig, fit_params)
+
+
+def outer_share(R: np.ndarray, t: np.ndarray, alpha: np.ndarray, model: PhotoModel, frame: StereoHue, rig: Rig,
+                fit_params: FitnessParams) -> np.ndarray:
+    """(P,): the largest share, over the two cameras, of outer points S_out on target hue."""
+    counts = (counts_reference if fit_params.kernel == "numpy" else counts_compiled)(
+        R, t, alpha, model, frame, rig, fit_params)
+    return counts[:, :, OUT_MISMATCH].max(axis=1) / max(1, len(model.outer_uv))
 
 
 @dataclass(frozen=True)
@@ -80,9 +96,11 @@ class Detection:
     pose that fits one image and not the other, cannot pass on the strength of one camera (the GA
     itself optimises the configured combination). `null_level`: the median of `null_scores`;
     `contrast` = (score - null_level) / (1 - null_level) (module docstring). `outer_on_target`:
-    the largest share, over the two cameras, of outer points S_out landing on target hue — the
-    creature's outline must end where the model's does (a buoy or another species of the same
-    colour usually spills over).
+    the largest share, over the two cameras, of outer points S_out landing on target hue beyond
+    what the pair's own background gives, (o - o_null) / (1 - o_null) with o_null the median share
+    at the null placements (0 for a creature whose hues the water lacks; near 1 for a many-hued
+    one whose hues include the water's) — the creature's outline must end where the model's does
+    (a buoy or another species of the same colour usually spills over).
     passed = contrast >= min_contrast and outer_on_target <= max_outer_on_target;
     confidence = logistic((contrast - min_contrast) / confidence_scale)
                  · logistic((max_outer_on_target - outer_on_target) / 0.02).
@@ -103,9 +121,10 @@ def detect(c: Candidate, model: PhotoModel, frame: StereoHue, rig: Rig, fit_para
     """The detection test of one candidate (see `Detection`); `seed` draws the null placements."""
     strict = dataclasses.replace(fit_params, combine="min")
     score = float(fitness(c.R_model, c.position_mm, c.alpha, model, frame, rig, strict)[0])
-    counts = counts_reference(c.R_model, c.position_mm, c.alpha, model, frame, rig, fit_params)[0]
-    outer = float(counts[:, OUT_MISMATCH].max()) / max(1, len(model.outer_uv))
-    null = null_scores(c, model, frame, rig, fit_params, np.random.default_rng(seed))
+    null, null_outer = null_scores(c, model, frame, rig, fit_params, np.random.default_rng(seed))
+    o_null = min(float(np.median(null_outer)), 0.99) if len(null_outer) else 0.0
+    o = float(outer_share(c.R_model, c.position_mm, c.alpha, model, frame, rig, fit_params)[0])
+    outer = max(0.0, (o - o_null) / (1.0 - o_null))
     q = float(np.median(null)) if len(null) else 0.0
     q = min(q, 0.99)
     contrast = (score - q) / (1.0 - q)

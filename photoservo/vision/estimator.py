@@ -28,7 +28,8 @@ from photoservo.errors import InputError
 from photoservo.vision.detection import Detection, detect
 from photoservo.vision.fitness import FitnessParams, StereoHue, stereo_hue
 from photoservo.vision.ga import GAParams
-from photoservo.vision.photo_model import PhotoModel
+from photoservo.vision.hue_layout import layout_pairs
+from photoservo.vision.photo_model import HUE_BINS, PhotoModel
 from photoservo.vision.pose_search import Candidate, PoseSearch
 from photoservo.vision.rig import Rig
 from photoservo.vision.seeding import ModelShape, group_pairs, match_blobs, seed_genes, target_blobs
@@ -53,6 +54,7 @@ class EstimatorParams:
     window_depth: float  # seeded window: inverse depth +- this fraction
     window_scale: float  # seeded window: ln s +- this
     window_grow: float  # seeded window: ln s reaches this far above the blob's (the blob may be a piece)
+    layout_share: float  # seed from the hue layout when more than this share of hued pixels have target hues
     group_reach: float  # blob pairs group when their gap is <= this x the sum of their half-lengths
     plane_refine: bool  # correct the tilt by a stereo plane fit over the inner points (vision/stereo_plane.py)
     plane_fitness_tol: float  # ...accepted when the re-fitted pose's fitness is at most this below the GA's
@@ -83,6 +85,7 @@ class EstimatorParams:
             ("window_scale", self.window_scale > 0, "must be > 0"),
             ("window_grow", self.window_grow >= 0, "must be >= 0"),
             ("aspect_max", self.aspect_max >= 1.0, "must be >= 1"),
+            ("layout_share", 0.0 <= self.layout_share <= 1.0, "must be in [0, 1]"),
             ("group_reach", self.group_reach >= 0, "must be >= 0"),
             ("min_generations", 0 <= self.min_generations <= self.max_generations,
              "need 0 <= min_generations <= max_generations"),
@@ -140,6 +143,39 @@ class Estimate:
         return out
 
 
+def _islands(model: PhotoModel, rig: Rig, frame: StereoHue, ga_params: GAParams, p: EstimatorParams,
+             fit_params: FitnessParams, ss: np.random.SeedSequence) -> list[tuple[str, PoseSearch]]:
+    """The acquisition's GA islands (module docstring): one per seed pair, at most
+    max_candidates, largest first; an unseeded one over the whole volume when asked or when
+    nothing seeds."""
+    islands: list[tuple[str, PoseSearch]] = []
+    if p.seeding and p.genes == "image":
+        shape = ModelShape.of(model)
+        hued = frame.left[frame.left < HUE_BINS]
+        if len(hued) and float(np.mean(model.target_hues[hued])) > p.layout_share:
+            # the creature's hues are everywhere (a many-hued creature, the water's hue among its
+            # own): seed from where the photo's hue layout agrees (vision/hue_layout.py)
+            pairs = layout_pairs(frame.left, frame.right, model, shape.area, rig, p)
+        else:
+            bl = target_blobs(frame.left, model.target_hues, p.min_blob_px)
+            br = target_blobs(frame.right, model.target_hues, p.min_blob_px)
+            pairs = match_blobs(bl, br, rig, p)
+            # groups of pieces (a creature split by foam) beside the single blobs, largest first
+            pairs = sorted(group_pairs(pairs, p) + pairs, key=lambda bp: -bp.left.area)
+        pairs = pairs[: p.max_candidates]
+        for i, (pair, s) in enumerate(zip(pairs, ss.spawn(len(pairs)))):
+            rng = np.random.default_rng(s)
+            search = PoseSearch(model, rig, frame, ga_params, p, fit_params, rng)
+            seeds, region = seed_genes(pair, shape, search.space, rng, ga_params.population)
+            search.ga.set_region(region)
+            search.ga.genes[:] = seeds
+            islands.append((f"blob {i}", search))
+    if p.global_island or not islands:
+        rng = np.random.default_rng(ss.spawn(1)[0])
+        islands.append(("global", PoseSearch(model, rig, frame, ga_params, p, fit_params, rng)))
+    return islands
+
+
 def estimate(model: PhotoModel, left_bgr: np.ndarray, right_bgr: np.ndarray, rig: Rig,
              ga_params: GAParams, est_params: EstimatorParams, fit_params: FitnessParams,
              seed: int = 0, frame: StereoHue | None = None) -> Estimate:
@@ -153,24 +189,7 @@ def estimate(model: PhotoModel, left_bgr: np.ndarray, right_bgr: np.ndarray, rig
     frame = frame or stereo_hue(left_bgr, right_bgr, fit_params)
     ss = np.random.SeedSequence(seed)
     p = est_params
-    islands: list[tuple[str, PoseSearch]] = []
-    if p.seeding and p.genes == "image":
-        bl = target_blobs(frame.left, model.target_hues, p.min_blob_px)
-        br = target_blobs(frame.right, model.target_hues, p.min_blob_px)
-        pairs = match_blobs(bl, br, rig, p)
-        # groups of pieces (a creature split by foam) beside the single blobs, largest first
-        pairs = sorted(group_pairs(pairs, p) + pairs, key=lambda bp: -bp.left.area)[: p.max_candidates]
-        shape = ModelShape.of(model)
-        for i, (pair, s) in enumerate(zip(pairs, ss.spawn(len(pairs)))):
-            rng = np.random.default_rng(s)
-            search = PoseSearch(model, rig, frame, ga_params, p, fit_params, rng)
-            seeds, region = seed_genes(pair, shape, search.space, rng, ga_params.population)
-            search.ga.set_region(region)
-            search.ga.genes[:] = seeds
-            islands.append((f"blob {i}", search))
-    if p.global_island or not islands:
-        rng = np.random.default_rng(ss.spawn(1)[0])
-        islands.append(("global", PoseSearch(model, rig, frame, ga_params, p, fit_params, rng)))
+    islands = _islands(model, rig, frame, ga_params, p, fit_params, ss)
     results = []
     evaluations = 0
     firsts = [search.run(ambiguity_check=False) for _, search in islands]

@@ -250,16 +250,23 @@ def seed_genes(pair: BlobPair, shape: ModelShape, space: GeneSpace, rng: np.rand
     seeds[:, 4], seeds[:, 5] = tilt * np.cos(phi), tilt * np.sin(phi)
     # the blob may be a fragment of the creature (foam, glints): scales up to x1.5 are as likely
     seeds[:, 6] = ls0 + rng.uniform(-0.1, 0.4, n)
-    # a third grown: a larger model holding the piece's centroid at a random point of its mask
-    g = k[k % 3 == 2]
-    if p.window_grow > 0 and len(g):
-        ls = ls0 + rng.uniform(0.2, p.window_grow, len(g))
-        ys, xs = np.nonzero(space.model.mask)
-        pick = rng.integers(len(xs), size=len(g))
-        at = np.column_stack([xs[pick], ys[pick]]) - np.asarray(space.model.origin_px)  # photo px from origin
-        c, s_ = np.cos(psi[g]), np.sin(psi[g])
-        e = np.exp(ls)
-        seeds[g, 0] = cu - e * (c * at[:, 0] - s_ * at[:, 1])
-        seeds[g, 1] = cv - e * (s_ * at[:, 0] + c * at[:, 1])
-        seeds[g, 6] = ls
+    if p.window_grow > 0:  # a third grown from the piece
+        g = k[k % 3 == 2]
+        seeds[g] = _grown(seeds[g], space.model, (cu, cv), ls0 + rng.uniform(0.2, p.window_grow, len(g)), rng)
     return region.repair(seeds), region
+
+
+def _grown(seeds: np.ndarray, model: PhotoModel, piece_uv: tuple[float, float], ls: np.ndarray,
+           rng: np.random.Generator) -> np.ndarray:
+    """Seeds (image coding, headings as given) made into larger models (ln s = `ls`) that hold
+    the piece's centroid `piece_uv` (left image px) at a random point of the photo's mask."""
+    seeds = seeds.copy()
+    ys, xs = np.nonzero(model.mask)
+    pick = rng.integers(len(xs), size=len(seeds))
+    at = np.column_stack([xs[pick], ys[pick]]) - np.asarray(model.origin_px)  # photo px from the origin
+    c, s = np.cos(seeds[:, 3]), np.sin(seeds[:, 3])
+    e = np.exp(ls)
+    seeds[:, 0] = piece_uv[0] - e * (c * at[:, 0] - s * at[:, 1])
+    seeds[:, 1] = piece_uv[1] - e * (s * at[:, 0] + c * at[:, 1])
+    seeds[:, 6] = ls
+    return seeds
