@@ -52,8 +52,8 @@ def null_scores(c: Candidate, model: PhotoModel, frame: StereoHue, rig: Rig, fit
                 rng: np.random.Generator, placements: int = 40, jitters: int = 6) -> tuple[np.ndarray, np.ndarray]:
     """Detection scores (fitness, cameras combined by min) of the candidate's model where the
     candidate is not: `placements` poses at the candidate's depth, tilt and alpha with the model
-    origin at random pixels of the left image at least one apparent model length away from the
-    candidate's, any heading; each the best of `jitters` variants (origin within a fifth of the
+    origin at random pixels of the left image at least one apparent model length (at most 0.4 of
+    the image's shorter side) away from the candidate's and inside the right image too, any heading; each the best of `jitters` variants (origin within a fifth of the
     length, heading +- 20 deg, alpha +- 10 %). Returns the (placements,) scores and the shares of
     outer points on target hue at every variant (`outer_share`); empty when the image has no room
     off the candidate."""
@@ -67,7 +67,16 @@ def null_scores(c: Candidate, model: PhotoModel, frame: StereoHue, rig: Rig, fit
     W, H = rig.left.width, rig.left.height
     m = 0.5 * min(length, 0.8 * min(W, H))
     uv = rng.uniform([m, m], [max(m + 1, W - m), max(m + 1, H - m)], size=(8 * placements, 2))
-    uv = uv[np.hypot(uv[:, 0] - u0, uv[:, 1] - v0) >= length][:placements]
+    # off the footprint; a model too large for that (longer than ~0.4 of the image) at least that far
+    uv = uv[np.hypot(uv[:, 0] - u0, uv[:, 1] - v0) >= min(length, 0.4 * min(W, H))]
+    # ...and where the right camera sees it too (near the rig the disparity is large)
+    X = np.column_stack([(uv[:, 0] - K[0, 2]) * z / K[0, 0], (uv[:, 1] - K[1, 2]) * z / K[1, 1], np.full(len(uv), z)])
+    Xr = X @ rig.R.T + rig.T
+    Kr = rig.right.K
+    ur = Kr[0, 0] * Xr[:, 0] / Xr[:, 2] + Kr[0, 2]
+    vr = Kr[1, 1] * Xr[:, 1] / Xr[:, 2] + Kr[1, 2]
+    seen = (ur >= m) & (ur <= rig.right.width - m) & (vr >= m) & (vr <= rig.right.height - m)
+    uv = uv[seen][:placements]
     if not len(uv):
         return np.zeros(0), np.zeros(0)
     n = len(uv) * jitters
