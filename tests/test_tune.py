@@ -97,11 +97,11 @@ def test_small_study_beats_a_bad_start_on_held_out_worlds(tmp_path: Path, capsys
 
 
 def test_replay_and_track_json_scores_agree(tmp_path: Path, capsys):
-    """One `track --sim --lockstep --json` run (6 frames; a strict detection threshold misses
+    """One `track --sim --lockstep --json` run (6 frames; a strict detection contrast misses
     one): its JSON, its recording and its replay give the same lost share and track error."""
     rec = tmp_path / "run.rrd"
     assert main(["track", "--sim", "--lockstep", "--duration", "1.2", "--set", "sim.camera_fps=5", "--seed", "3",
-                 "--set", "estimator.threshold=0.9", "--json", "--record", str(rec)]) == 0
+                 "--set", "estimator.min_contrast=0.85", "--json", "--record", str(rec)]) == 0
     live = session_scores(json.loads(capsys.readouterr().out))
     recorded = recording_scores(run_metrics(read_recording(rec)))
     replayed = replay_scores(Sources(recordings=(str(rec),)), {}, str(rec))
