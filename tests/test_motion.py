@@ -108,10 +108,11 @@ def test_check_target_names_the_joint_or_the_limit():
     with pytest.raises(InputError, match=r"joint E1 = 136.00 deg is within joint_margin_deg = 2"):
         m.check_target(q)
     low = Motion(dataclasses.replace(PARAMS, z_min_mm=700.0), LIM)
-    with pytest.raises(InputError, match=r"target: the flange would go below the water plane \(z = 624.7 mm < z_min_mm = 700\)"):
+    # the camera rig box hangs 170 mm under the flange (624.7 mm at home): its bottom is 245.3 mm under
+    with pytest.raises(InputError, match=r"target: the camera rig box would go below the water plane \(245.3 mm under z_min_mm = 700\)"):
         low.check_target(HOME_Q)
     boxed = Motion(dataclasses.replace(PARAMS, workspace_max_mm=(700.0, 1400.0, 1500.0)), LIM)
-    with pytest.raises(InputError, match=r"leave the workspace box \(x = 725.0 mm > workspace_max_mm\[0\] = 700\)"):
+    with pytest.raises(InputError, match=r"the camera rig box would leave the workspace box \(135.0 mm past workspace_max_mm\[0\]\)"):
         boxed.check_target(HOME_Q)
 
 
@@ -132,7 +133,8 @@ def test_keepout_crossing_path_is_refused_and_the_arm_stays():
 
 def test_stops_before_joint_range_with_margin():
     # let the joints run at full speed, and S2 lean the arm down to its range end (flange at z = -158 mm)
-    params = dataclasses.replace(PARAMS, tool_speed_max_mm_s=5000.0, z_min_mm=-300.0)
+    params = dataclasses.replace(PARAMS, tool_speed_max_mm_s=5000.0, z_min_mm=-650.0,
+                                 workspace_min_mm=(-1400.0, -1400.0, -700.0))  # the volumes reach lower
     m = Motion(params, LIM)
     for j, sign in ((1, +1), (3, -1), (4, +1)):
         dq_t = np.zeros(7)
@@ -191,11 +193,11 @@ def test_water_keepout_stops_a_descending_servo():
     m = Motion(dataclasses.replace(PARAMS, z_min_mm=z_min), LIM)
     down = np.array([0.0, 0.0, -300.0, 0.0, 0.0, 0.0])  # mm/s, base frame
     sps = run(m, lambda q, dq: m.velocity_step(q, dq, dls_step(q, down, 0.05, k_null=1.0)), 600)  # at rest by step ~500
-    z = [min(p[2] for p in m.keepout_points(s.q).values()) for s in sps]
-    assert min(z) >= z_min
-    assert min(z) < z_min + 30  # it came down close to the water first
+    c = m.keepout.clearance(np.array([s.q for s in sps]))[0]  # of the volumes (mm)
+    assert c.min() >= 0
+    assert c.min() < 50  # it came down close to the water first (the caps aim 25 mm inside)
     np.testing.assert_allclose(sps[-1].dq, 0, atol=1e-9)
-    assert any("keep-out: slowing the flange" in s.reason for s in sps)
+    assert any("keep-out: slowing the camera rig box" in s.reason for s in sps)
     assert not any(s.reason.startswith("braking check") for s in sps)
     assert_within_limits(m, sps)
 
@@ -211,11 +213,11 @@ def test_braking_check_stops_an_arm_measured_too_close_too_fast():
     sp = m.velocity_step(q, dq, dq)
     assert sp.reason == "braking check: joint range (E2)"
     np.testing.assert_allclose(sp.ddq[4], -LIM.dddq_max[4] * m.dt)  # braking at the jerk limit from a = 0
-    low = Motion(dataclasses.replace(PARAMS, z_min_mm=600.0), LIM)
+    low = Motion(dataclasses.replace(PARAMS, z_min_mm=430.0), LIM)
     dq = np.zeros(7)
-    dq[1] = 0.5  # S2 forward: the flange (at 624.7 mm) drops toward z = 600 at ~0.5 rad/s x 725 mm
+    dq[1] = 0.5  # S2 forward: the rig box's bottom (at 454.7 mm) drops toward z = 430 at ~0.5 rad/s x 835 mm
     sp = low.velocity_step(HOME_Q, dq, np.zeros(7))
-    assert sp.reason.startswith("braking check: the flange would go below the water plane")
+    assert sp.reason.startswith("braking check: the camera rig box would go below the water plane")
     assert sp.ddq[1] < 0
 
 

@@ -360,4 +360,4 @@ def link_capsules(frames: np.ndarray) -> np.ndarray:
     """The capsule end points (..., 4, 3) (mm, base frame) — shoulder, elbow, wrist, flange —
     from `fk_frames` output (..., 8, 4, 4): consecutive ends bound the upper arm, the forearm
     and the wrist (radii: [motion] link_radii_mm, servo/keepout.py)."""
-    return frames[..., CAPSULE_ENDS, :3, 3]
+    return frames[..., :3, 3][..., list(CAPSULE_ENDS), :]

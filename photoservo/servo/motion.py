@@ -29,8 +29,10 @@ of the plain Ruckig step:
 3. Tool-speed cap: the speed of the tool point is kept under `tool_speed_max_mm_s` (velocity
    targets are scaled down; a move is time-scaled, v·s, a·s², j·s³, which keeps its path).
 4. Braking check: the step is accepted only if a controlled stop started from the new setpoint
-   would stay inside the joint ranges (less half the margin), above the water plane
-   (`z_min_mm`) and inside the workspace box, for the elbow, wrist, flange and tool points.
+   would stay inside the joint ranges (less half the margin), and keep the arm's VOLUMES (link
+   capsules, the camera rig + tool box; servo/keepout.py) above the water plane (`z_min_mm`)
+   and inside the workspace box, checked continuously along the stop, as a move's whole path
+   is when its target is adopted.
    Otherwise the arm is told to stop instead: while the arm follows the plan the step starts
    from the last setpoint, whose stop was checked, so that stop is safe; after a re-plan from
    an off-plan measured state, stopping is still the best there is.
@@ -60,20 +62,14 @@ from ruckig import (
 )
 
 from photoservo.errors import InputError
+from photoservo.servo.keepout import FEATURES, Keepout
 from photoservo.robot.pa10 import (
-    DH_D_MM,
     JOINT_NAMES,
     N_JOINTS,
     PA10Limits,
-    fk_frames,
     jacobian,
     tool_offset,
 )
-
-#: link frames whose origins are kept out of the water and inside the workspace: elbow (3),
-#: wrist (5) and flange (7); the tool point is checked as well.
-KEEPOUT_FRAMES = {"elbow": 3, "wrist": 5, "flange": 7}
-
 
 @dataclass(frozen=True)
 class MotionParams:
@@ -88,6 +84,9 @@ class MotionParams:
     workspace_max_mm: tuple[float, float, float]  # workspace box, upper corner (base frame, mm)
     tool_speed_max_mm_s: float  # cap on the tool point's speed (mm/s)
     tool_offset_mm: tuple[float, float, float]  # tool point in the flange frame (mm)
+    link_radii_mm: tuple[float, float, float]  # keep-out capsule radii: upper arm, forearm, wrist (mm)
+    rig_box_min_mm: tuple[float, float, float]  # keep-out box of the camera rig + tool, flange frame (mm)
+    rig_box_max_mm: tuple[float, float, float]
     track_tolerance_deg: float  # measured joints this close to a recent setpoint = following the plan
     track_window_s: float  # how far back "recent" reaches: the state's expected lateness (s)
 
@@ -114,6 +113,11 @@ class MotionParams:
                 raise bad("workspace_max_mm", f"must exceed workspace_min_mm on axis {'xyz'[i]}")
         if not self.workspace_min_mm[2] <= self.z_min_mm < self.workspace_max_mm[2]:
             raise bad("z_min_mm", "must lie inside the workspace box's z range")
+        if not all(0.0 <= r <= 500.0 for r in self.link_radii_mm):
+            raise bad("link_radii_mm", "must be 3 radii in 0..500 mm")
+        for i in range(3):
+            if not -2000.0 <= self.rig_box_min_mm[i] < self.rig_box_max_mm[i] <= 2000.0:
+                raise bad("rig_box_max_mm", f"must exceed rig_box_min_mm on axis {'xyz'[i]}, both within +-2000 mm")
 
 
 @dataclass(frozen=True, eq=False)
@@ -164,6 +168,7 @@ class Motion:
     """
 
     _BRAKE_SAMPLE_S = 0.02  # sampling step of the braking trajectory in the braking check (s)
+    _CAP_MARGIN_MM = 25.0  # the keep-out caps aim this far inside the boundaries (the braking check is the guarantee)
 
     def __init__(self, params: MotionParams, limits: PA10Limits, T_flange_tool: np.ndarray | None = None):
         self.params = params
@@ -192,8 +197,9 @@ class Motion:
         # joint gives at a 500 mm lever (mm/s², mm/s³)
         self._a_cart = float(limits.ddq_max.min()) * 500.0
         self._j_cart = float(limits.dddq_max.min()) * 500.0
-        # length of the chain beyond each joint, up to the tool point (mm): d_j + ... + d_7 + |tool|
-        self._chain_mm = np.cumsum(DH_D_MM[::-1])[::-1] + float(np.linalg.norm(self.T_flange_tool[:3, 3]))
+        self.keepout = Keepout(params.z_min_mm, params.workspace_min_mm, params.workspace_max_mm,
+                               params.link_radii_mm, params.rig_box_min_mm, params.rig_box_max_mm,
+                               self.T_flange_tool)
         self._override = params.speed_override_pct / 100.0
         self._last: Setpoint | None = None
         self._history: deque[np.ndarray] = deque(maxlen=max(1, round(params.track_window_s * params.rate_hz)))
@@ -216,32 +222,16 @@ class Motion:
         self._target = None  # re-plan (and re-scale) the current move at the new speed
 
     def keepout_points(self, q: np.ndarray) -> dict[str, np.ndarray]:
-        """Base-frame positions (mm) of the points the Cartesian keep-out applies to: name ->
+        """Base-frame positions (mm) of the keep-out features (servo/keepout.py FEATURES): name ->
         (3,) for q of shape (7,), or (N, 3) for a batch (N, 7)."""
-        F = fk_frames(q)
-        pts = {name: F[..., i, :3, 3] for name, i in KEEPOUT_FRAMES.items()}
-        pts["tool"] = (F[..., -1, :, :] @ self.T_flange_tool)[..., :3, 3]
-        return pts
+        P = self.keepout.features(q)
+        P = P[0] if np.ndim(q) == 1 else P
+        return {name: P[..., k, :] for k, name in enumerate(FEATURES)}
 
     def keepout_violation(self, q: np.ndarray) -> str:
-        """'' when every keep-out point at q (rad; (7,) or a path (N, 7)) is above the water
-        plane and inside the workspace box, else a message naming the point and the limit."""
-        p = self.params
-        lo, hi = np.asarray(p.workspace_min_mm), np.asarray(p.workspace_max_mm)
-        for name, x in self.keepout_points(q).items():
-            x = x.reshape(-1, 3)
-            below = x[:, 2] < p.z_min_mm
-            if below.any():
-                z = x[below, 2].min()
-                return f"the {name} would go below the water plane (z = {z:.1f} mm < z_min_mm = {p.z_min_mm:g})"
-            for i in range(3):
-                if (x[:, i] < lo[i]).any():
-                    return (f"the {name} would leave the workspace box ({'xyz'[i]} = {x[:, i].min():.1f} mm < "
-                            f"workspace_min_mm[{i}] = {lo[i]:g})")
-                if (x[:, i] > hi[i]).any():
-                    return (f"the {name} would leave the workspace box ({'xyz'[i]} = {x[:, i].max():.1f} mm > "
-                            f"workspace_max_mm[{i}] = {hi[i]:g})")
-        return ""
+        """'' when the arm's volumes at q (rad; (7,) or a path (N, 7)) are above the water plane
+        and inside the workspace box, else a message naming the volume and the limit."""
+        return self.keepout.violation(q)
 
     def check_target(self, q_target: np.ndarray, q_start: np.ndarray | None = None) -> None:
         """Raise InputError naming the joint or the limit when q_target (rad) is outside the
@@ -310,7 +300,7 @@ class Motion:
                   | ((v_cap_lo < v) & (-sp.dq >= 0.98 * v_cap_lo) & (sp.dq < 0)))
         if slowed.any():
             reasons.append("joint range: slowing " + ", ".join(np.array(JOINT_NAMES)[slowed]))
-        checked = self._accept(q_meas, dq_meas, sp, reasons, P)
+        checked = self._accept(q_meas, dq_meas, sp, reasons)
         err = np.abs(q_arm - q_target)
         self.done = bool(result == Result.Finished and np.all(err <= math.radians(self.params.position_tolerance_deg))
                          and not checked.reason.startswith("braking"))
@@ -360,7 +350,7 @@ class Motion:
         if result not in (Result.Working, Result.Finished):
             sp = self.stop_step(q_meas, dq_meas, reason=f"Ruckig refused the velocity target ({result})")
         else:
-            sp = self._accept(q_meas, dq_meas, self._from_out(), reasons, P)
+            sp = self._accept(q_meas, dq_meas, self._from_out(), reasons)
         self.done = False
         return sp
 
@@ -481,9 +471,12 @@ class Motion:
         return np.array([x[0] for x in pv]), np.array([x[1] for x in pv])
 
     def _path_violation(self, q0, dq0, a0, q_target) -> str:
+        """The planned path to q_target, checked continuously (servo/keepout.py). The time
+        scale does not change the path, so the plan without it is checked."""
         if not self._plan(q0, dq0, a0, q_target):
             return "Ruckig cannot plan it"
-        return self.keepout_violation(self._samples()[0])
+        v = np.maximum(self._override * self.limits.dq_max, np.abs(dq0))
+        return self.keepout.sweep_violation(lambda t: self._traj.at_time(t)[0], self._traj.duration, v)
 
     def _range_caps(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Per joint, the highest speed (>= 0) toward the lower / upper range end from which a
@@ -499,19 +492,9 @@ class Motion:
         return lo, hi
 
     def _point_jacobians(self, q: np.ndarray) -> tuple[list[str], np.ndarray, np.ndarray]:
-        """Keep-out point names, positions P (K, 3) (mm, base frame) and translational Jacobians
-        J (K, 3, 7) at q: J_v,i = z_{i-1} × (p - o_{i-1}) for the joints that move the point."""
-        F = fk_frames(q)
-        z, o = F[:-1, :3, 2], F[:-1, :3, 3]
-        names = [*KEEPOUT_FRAMES, "tool"]
-        moved_by = [*KEEPOUT_FRAMES.values(), N_JOINTS]
-        P = np.array([F[i][:3, 3] for i in KEEPOUT_FRAMES.values()] + [(F[-1] @ self.T_flange_tool)[:3, 3]])
-        r = P[:, None, :] - o[None, :, :]  # (K, 7, 3)
-        J = np.stack([z[:, 1] * r[..., 2] - z[:, 2] * r[..., 1],
-                      z[:, 2] * r[..., 0] - z[:, 0] * r[..., 2],
-                      z[:, 0] * r[..., 1] - z[:, 1] * r[..., 0]], axis=1)  # (K, 3, 7)
-        J *= (np.arange(N_JOINTS)[None, :] < np.array(moved_by)[:, None])[:, None, :]
-        return names, P, J
+        """Keep-out feature names, positions P (K, 3) (mm, base frame) and Jacobians J (K, 3, 7)."""
+        P, J = self.keepout.point_jacobians(q)
+        return list(FEATURES), P, J
 
     def _keepout_caps(self, names: list[str], P: np.ndarray, J: np.ndarray, dq: np.ndarray) -> tuple[np.ndarray, list[str]]:
         """Velocity-target filter for the Cartesian keep-out (so the braking check rarely has to
@@ -525,19 +508,18 @@ class Motion:
         hi = np.asarray(p.workspace_max_mm)
         V = J @ dq  # (K, 3) point velocities (mm/s)
         approach = np.concatenate([-V, V], axis=1)  # toward the lower faces, toward the upper faces
-        clearance = np.concatenate([P - lo, hi - P], axis=1)
+        clearance = np.concatenate([P - lo, hi - P], axis=1) - self.keepout.radius[:, None] - self._CAP_MARGIN_MM
         allow = stopping_speed(clearance - 2 * self.dt * np.maximum(approach, 0), self._a_cart, self._j_cart)
         over = approach > allow
         if not over.any():
             return dq, []
         scale = float(np.min(allow[over] / approach[over]))
-        return dq * scale, [n for n, o in zip(names, over.any(axis=1)) if o]
+        return dq * scale, list(dict.fromkeys(n.split(" corner")[0] for n, o in zip(names, over.any(axis=1)) if o))
 
     def _tool_speed(self, q: np.ndarray, dq: np.ndarray) -> float:
         return float(np.linalg.norm(jacobian(q, self.T_flange_tool)[:3] @ dq))
 
-    def _accept(self, q_meas: np.ndarray, dq_meas: np.ndarray, sp: Setpoint, reasons: list[str],
-                P_start: np.ndarray) -> Setpoint:
+    def _accept(self, q_meas: np.ndarray, dq_meas: np.ndarray, sp: Setpoint, reasons: list[str]) -> Setpoint:
         """Braking check (safety layer 4): keep `sp` only if a controlled stop from it stays in
         the ranges (less half the margin) and the keep-out; else stop from the measured state."""
         inp = self._brake_inp
@@ -559,23 +541,21 @@ class Motion:
             names = ", ".join(np.array(JOINT_NAMES)[bad])
             return self.stop_step(q_meas, dq_meas, reason=f"braking check: joint range ({names})")
         travel = np.maximum(np.abs(hi - q_meas), np.abs(lo - q_meas))  # from the step's start
-        why = self._keepout_on_brake(P_start, Q, travel)
+        why = self._keepout_on_brake(q_meas, sp, travel)
         if why:
             return self.stop_step(q_meas, dq_meas, reason=f"braking check: {why}")
         out = Setpoint(sp.q, sp.dq, sp.ddq, "; ".join(dict.fromkeys(reasons)))
         self._emit(out)
         return out
 
-    def _keepout_on_brake(self, P_start: np.ndarray, Q: np.ndarray, dq_travel: np.ndarray) -> str:
-        """Keep-out along the braking trajectory Q (N, 7). The samples are checked only when a
-        point (at P_start (K, 3), the step's start) is closer to a keep-out boundary than the
-        most the step and the stop could move it: joint j turning by |dq_j| moves a point by at
-        most |dq_j| times the length of the chain beyond joint j."""
-        bound = float(dq_travel @ self._chain_mm) + 1e-6
-        p = self.params
-        lo = np.array([p.workspace_min_mm[0], p.workspace_min_mm[1], max(p.z_min_mm, p.workspace_min_mm[2])])
-        hi = np.asarray(p.workspace_max_mm)
-        clearance = float(np.min(np.minimum(P_start - lo, hi - P_start)))
-        if clearance > bound:
+    def _keepout_on_brake(self, q_start: np.ndarray, sp: Setpoint, dq_travel: np.ndarray) -> str:
+        """Keep-out along the braking trajectory in self._traj, from sp. Checked only when the
+        volumes at q_start (the step's start) are closer to a boundary than the most the step
+        and the stop could move them (joint j turning by |dq_j| moves a point by at most |dq_j|
+        times the reach beyond joint j); then continuously, with the stop's joint speeds bounded
+        by |dq| + ddq²/(2·jerk) (the acceleration still rising while the jerk takes it to 0)."""
+        c0 = float(self.keepout.clearance(q_start[None])[0][0])
+        if c0 > float(dq_travel @ self.keepout.reach_mm) + 1e-6:
             return ""
-        return self.keepout_violation(Q)
+        v = np.abs(sp.dq) + sp.ddq**2 / (2.0 * self.limits.dddq_max) + 1e-9
+        return self.keepout.sweep_violation(lambda t: self._traj.at_time(t)[0], self._traj.duration, v)
