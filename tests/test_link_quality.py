@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from photoservo.robot import protocol as P
-from photoservo.robot.link import Link, LinkQualityError
+from photoservo.robot.link import Link, LinkError, LinkQualityError
 from photoservo.robot.link_quality import BAD, REFUSED, WATCHDOG, QualityWindow, report_events
 from photoservo.sim.emulator import Emulator
 from test_link import emu_params, hold, link_params, wait_for
@@ -95,3 +95,20 @@ def test_quality_limits_are_bounded():
                    ("quality_window_s", 0.0), ("max_watchdog_per_s", float("nan"))):
         with pytest.raises(InputError, match=key):
             dataclasses.replace(link_params(gate=True), **{key: v}).validate("link")
+
+
+def test_non_finite_state_is_never_used_and_counts_as_a_bad_frame():
+    # a bridge that reports NaN joints (a firmware fault): the host keeps the last finite state
+    # and counts the report against the gate
+    with Emulator(emu_params()) as e, Link(e.path, link_params(gate=True)) as lk:
+        good = lk.wait_state()
+        report = e.model.report
+        e.model.report = lambda: dataclasses.replace(report(), q=(float("nan"),) * 7)
+        time.sleep(0.3)
+        q = lk.quality()
+        assert q.bad_frames > 10
+        assert all(np.all(np.isfinite(s.q)) for s in lk.history())
+        with pytest.raises(LinkError, match="silent|quality gate"):
+            lk.state()
+        e.model.report = report
+        np.testing.assert_allclose(lk.history()[-1].q, good.q, atol=1e-6)

@@ -445,7 +445,9 @@ class Link:
         if self.decoder.frames == 1:
             self._errors_at_sync = self.decoder.errors
         with self._cond:
-            if isinstance(m, P.StateReport):
+            if isinstance(m, P.StateReport) and not np.all(np.isfinite(m.q + m.dq)):
+                self._quality.add(t_rx, BAD)  # a bridge fault, not a state: counted, never used
+            elif isinstance(m, P.StateReport):
                 off = self._clock_offset(t_rx, m.t_bridge_us * 1e-6)
                 s = JointState(m.t_bridge_us * 1e-6 + off, t_rx, np.array(m.q), np.array(m.dq),
                                P.Status(m.status), P.Fault(m.fault) if m.fault in P.Fault._value2member_map_
