@@ -37,7 +37,7 @@ import numpy as np
 from photoservo.errors import InputError
 from photoservo.fileio import read_image, write_image_atomic, write_text_atomic
 from photoservo.robot.link import Link, LinkError
-from photoservo.cli.config import add_config_options
+from photoservo.cli.options import add_config_options
 from photoservo.config import load_config
 from photoservo.tomlconf import configs_dir, read_toml
 from photoservo.vision.board import (

@@ -1,20 +1,20 @@
 """photoservo config show [--config CFG.toml] [--set section.key=value ...]
 
-Prints the effective configuration (defaults <- file <- overrides) as TOML."""
+Prints the effective configuration (defaults <- file <- overrides) as TOML, after the same
+checks every verb makes (types, bounds: configs/default.toml documents each key).
+
+Examples:
+    photoservo config show
+    photoservo config show --config site.toml --set ga.population=60
+"""
 
 from __future__ import annotations
 
 import argparse
 
+from photoservo.cli.options import add_config_options
 from photoservo.config import load_config
 from photoservo.tomlconf import dump_config
-
-
-def add_config_options(p: argparse.ArgumentParser) -> None:
-    """--config and --set, shared by every verb that reads the configuration."""
-    p.add_argument("--config", metavar="CFG.toml", help="config file with the keys to change")
-    p.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
-                   help="override one key, e.g. --set ga.population=60 (repeatable)")
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:

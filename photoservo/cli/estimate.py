@@ -22,7 +22,7 @@ import numpy as np
 
 from photoservo.errors import InputError
 from photoservo.fileio import read_image, write_image_atomic
-from photoservo.cli.config import add_config_options
+from photoservo.cli.options import add_config_options
 from photoservo.config import Config, load_config
 from photoservo.vision.estimator import Estimate, estimate
 from photoservo.vision.fitness import project_model

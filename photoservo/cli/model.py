@@ -14,7 +14,7 @@ import argparse
 import numpy as np
 
 from photoservo.fileio import read_image, write_image_atomic
-from photoservo.cli.config import add_config_options
+from photoservo.cli.options import add_config_options
 from photoservo.config import load_config
 from photoservo.vision.photo_model import draw_photo_model, load_photo_model, parse_roi
 

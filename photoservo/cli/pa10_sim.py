@@ -3,26 +3,28 @@
 
 The PA-10 serial-bridge emulator (photoservo/sim/emulator.py) on a pseudo-terminal: prints the
 device path on stdout (one line), optionally symlinks it at --link, and speaks the bridge
-protocol (docs/protocol.md) until Ctrl-C or SIGTERM. Defaults from the [emulator] config section.
+protocol (docs/protocol.md) until Ctrl-C, SIGTERM or SIGHUP (exit 130, 143, 129), then prints
+what it received (SERVO_ON / STOP / SERVO_OFF counts, setpoints, watchdog stops, line errors).
+Defaults from the [emulator] config section.
 
-Example (two shells):
+Examples (two shells):
     photoservo pa10-sim --link /tmp/pa10
     photoservo move --port /tmp/pa10 --joints 10 30 0 60 0 90 0
+    photoservo pa10-sim --corrupt 0.001 --drop 0.001 --seed 1   # a noisy line
 """
 
 from __future__ import annotations
 
 import argparse
 import dataclasses
-import signal
 import sys
-import threading
+import time
 
-from photoservo.errors import InputError
-from photoservo.robot.clock import set_realtime
-from photoservo.sim.emulator import Emulator
-from photoservo.cli.config import add_config_options
+from photoservo.cli.options import add_config_options, bounded, realtime_or_input_error, rt_priority, seed
+from photoservo.cli.signals import exit_code
 from photoservo.config import load_config
+from photoservo.errors import HardwareError
+from photoservo.sim.emulator import Emulator
 
 # CLI flag -> [emulator] key
 FLAGS = {"baud": "baud", "rate": "control_hz", "drop": "drop", "corrupt": "corrupt",
@@ -30,16 +32,20 @@ FLAGS = {"baud": "baud", "rate": "control_hz", "drop": "drop", "corrupt": "corru
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
+    prob = bounded(float, 0.0, 1.0)
     p.add_argument("--link", metavar="PATH", help="also make a symlink PATH -> the pty (removed on exit)")
-    p.add_argument("--baud", type=int, help="pace bytes as an 8N1 line at this rate; 0 = unpaced (default 921600)")
-    p.add_argument("--rate", type=float, help="control rate (Hz, default 250); state is sent at the same rate")
-    p.add_argument("--drop", type=float, metavar="P", help="probability that a byte is dropped (each direction)")
-    p.add_argument("--corrupt", type=float, metavar="P", help="probability that a byte is corrupted")
-    p.add_argument("--delay", type=float, metavar="P", help="probability that a byte stalls the line by --delay-ms")
-    p.add_argument("--delay-ms", type=float, metavar="MS", help="length of one injected stall (ms, default 20)")
-    p.add_argument("--brake-after", type=float, metavar="S", help="setpoint silence before the brakes engage (s)")
-    p.add_argument("--seed", type=int, help="seed of the fault injection")
-    p.add_argument("--rt-priority", type=int, metavar="N",
+    p.add_argument("--baud", type=bounded(int, 0, 10_000_000), help="pace bytes as an 8N1 line at this rate; 0 = unpaced (default 921600)")
+    p.add_argument("--rate", type=bounded(float, 1.0, 10_000.0, unit="Hz"),
+                   help="control rate (Hz, default 250); state is sent at the same rate")
+    p.add_argument("--drop", type=prob, metavar="P", help="probability that a byte is dropped (each direction, 0..1)")
+    p.add_argument("--corrupt", type=prob, metavar="P", help="probability that a byte is corrupted (0..1)")
+    p.add_argument("--delay", type=prob, metavar="P", help="probability that a byte stalls the line by --delay-ms (0..1)")
+    p.add_argument("--delay-ms", type=bounded(float, 0.0, 10_000.0, unit="ms"), metavar="MS",
+                   help="length of one injected stall (ms, default 20)")
+    p.add_argument("--brake-after", type=bounded(float, 0.0, 3600.0, unit="s"), metavar="S",
+                   help="setpoint silence before the brakes engage (s)")
+    p.add_argument("--seed", type=seed, help="seed of the fault injection (0..2^32-1)")
+    p.add_argument("--rt-priority", type=rt_priority, metavar="N",
                    help="run with SCHED_FIFO real-time priority N (1..99; Linux, needs permission), as a "
                         "stand-in for the bridge's dedicated hardware")
     add_config_options(p)
@@ -55,13 +61,8 @@ def run(args: argparse.Namespace) -> int:
     if args.rt_priority is not None:  # before the emulator thread starts: it inherits the policy
         realtime_or_input_error(args.rt_priority)
     emu = Emulator(params, link=args.link)
-    done = threading.Event()
-
-    def on_signal(signum, frame):  # SIGTERM (and SIGINT) end the emulator cleanly
-        done.set()
-
-    old = {s: signal.signal(s, on_signal) for s in (signal.SIGINT, signal.SIGTERM)}
     path = emu.start()
+    code = 0
     try:
         print(path, flush=True)
         where = f" (and {args.link})" if args.link else ""
@@ -69,28 +70,15 @@ def run(args: argparse.Namespace) -> int:
         print(f"pa10-sim: bridge on {path}{where}, {params.control_hz:g} Hz, "
               f"{'unpaced' if params.baud == 0 else f'{params.baud} baud'}"
               f"{', faults: ' + faults if faults else ''}; Ctrl-C to stop", file=sys.stderr, flush=True)
-        while not done.wait(0.2):
-            if emu.error is not None:
-                print(f"pa10-sim: error: emulator stopped: {emu.error}", file=sys.stderr)
-                return 1
+        while emu.error is None:
+            time.sleep(0.2)
+        raise HardwareError(f"emulator stopped: {emu.error}")
+    except KeyboardInterrupt as e:  # Ctrl-C, SIGTERM, SIGHUP (cli/signals.py): the normal way to end it
+        code = exit_code(e)
     finally:
         emu.stop()
-        for s, h in old.items():
-            signal.signal(s, h)
     d, m = emu.decoder, emu.model
-    print(f"pa10-sim: stopped; setpoints accepted {m.accepted}, refused {m.refused}; watchdog stops "
-          f"{m.watchdog_stops}; frames dropped "
-          f"(CRC/COBS/length) {d.errors}, resyncs {d.resyncs}; states sent {emu.states_sent}, "
+    print(f"pa10-sim: stopped; {m.describe_end()}; setpoints accepted {m.accepted}, refused {m.refused}; "
+          f"frames dropped (CRC/COBS/length) {d.errors}, resyncs {d.resyncs}; states sent {emu.states_sent}, "
           f"skipped (line busy) {emu.states_skipped}", file=sys.stderr)
-    return 0
-
-
-def realtime_or_input_error(priority: int) -> None:
-    """`--rt-priority N`: SCHED_FIFO for this process, or a one-line InputError."""
-    try:
-        set_realtime(priority)
-    except ValueError as e:
-        raise InputError(f"--rt-priority {priority}: {e}") from None
-    except (OSError, AttributeError) as e:
-        raise InputError(f"--rt-priority {priority}: not permitted here ({e}); run without it, "
-                         "or grant CAP_SYS_NICE / an rtprio limit") from None
+    return code

@@ -21,7 +21,7 @@ import json
 import math
 import sys
 
-from photoservo.cli.config import add_config_options
+from photoservo.cli.options import add_config_options
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:

@@ -21,7 +21,7 @@ from pathlib import Path
 
 from photoservo.errors import InputError
 from photoservo.fileio import write_image_atomic, write_text_atomic
-from photoservo.cli.config import add_config_options
+from photoservo.cli.options import add_config_options
 from photoservo.cli.estimate import add_stereo_inputs, load_stereo_inputs
 from photoservo.config import load_config
 from photoservo.vision.fitness import stereo_hue

@@ -26,7 +26,7 @@ from pathlib import Path
 
 from photoservo.errors import InputError
 from photoservo.fileio import read_image, write_image_atomic, write_text_atomic
-from photoservo.cli.config import add_config_options
+from photoservo.cli.options import add_config_options
 from photoservo.config import load_config
 from photoservo.vision.photo_model import load_photo_model
 from photoservo.vision.rig import dump_rig, load_rig

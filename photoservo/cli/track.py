@@ -14,7 +14,8 @@ heaving and rolling on the water, the stereo cameras on the simulated arm's flan
 real time: slower than real time on this machine, but deterministic.
 
 The arm is enabled at start and disabled at exit; --no-motion tracks without commanding it.
-Live status on stderr; Ctrl-C stops the arm in a controlled way and closes the recording.
+Live status on stderr. Ctrl-C, SIGTERM or SIGHUP stop the arm in a controlled way, switch the
+servo off and close the recording (exit 130, 143, 129); a link fault stops it too (exit 3).
 
 Examples:
     photoservo track --sim --duration 20
@@ -27,13 +28,14 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
-import json
 import math
 import sys
 
 from photoservo import __version__
-from photoservo.errors import InputError
-from photoservo.cli.config import add_config_options
+from photoservo.errors import EXIT_HARDWARE, InputError
+from photoservo.cli.options import add_config_options
+from photoservo.cli.output import dumps_strict
+from photoservo.cli.signals import report_stop
 from photoservo.config import load_config
 from photoservo.tomlconf import dump_config
 
@@ -136,7 +138,7 @@ def _report(args, sc, rec) -> int:
     if rec is not None:
         s["recording"] = _recording_files(rec)
     if args.json:
-        print(json.dumps(s, default=float))
+        print(dumps_strict(s))
     else:
         t = s["timings_ms_median"]
         print(f"frames {s['frames']}, found {100 * s['found_ratio']:.0f} %, lost {s['lost_events']}, "
@@ -149,7 +151,7 @@ def _report(args, sc, rec) -> int:
             print(f"fault: {f}")
         if rec is not None:
             print(f"recording: {_recording_files(rec)}")
-    return 1 if s["faults"] else 0
+    return EXIT_HARDWARE if s["faults"] else 0
 
 
 def _recording_files(rec) -> str:
@@ -172,6 +174,7 @@ def _run_sim(args, cfg) -> int:
     sim = build_sim(cfg)
     status = _StatusLine()
     rec = _recorder(args, cfg)
+    stop: KeyboardInterrupt | None = None
     try:
         if rec is not None:
             _setup_static(rec, cfg, sim.rig, sim.scene.photo, sim.scene.model, args.seed, {"sim": cfg.sim.seed})
@@ -186,11 +189,23 @@ def _run_sim(args, cfg) -> int:
                                       recorder=rec, status=status, seed=args.seed, rt_priority=args.rt_priority)
             finally:
                 emu.stop()
+                if rec is not None:  # what the emulated bridge saw: the stop and servo off, in order
+                    rec.event(rec.last_t, f"emulated bridge: {emu.model.describe_end()}")
+    except KeyboardInterrupt as e:  # Ctrl-C, SIGTERM, SIGHUP: the session stopped the arm in order
+        stop = e
     finally:
         status.close()
         if rec is not None:
             rec.close()
+    if stop is not None:
+        return report_stop("track", stop, _stopped(args, rec))
     return _report(args, sc, rec)
+
+
+def _stopped(args, rec) -> str:
+    """What an interrupted session did, for its one line."""
+    what = "tracking stopped" if args.no_motion else "controlled stop, servo off"
+    return what + (f"; recording: {_recording_files(rec)}" if rec is not None else "")
 
 
 def _run_hardware(args, cfg) -> int:
@@ -213,6 +228,7 @@ def _run_hardware(args, cfg) -> int:
         raise InputError("config key 'cameras.kind' is \"none\": configure the stereo cameras")
     status = _StatusLine()
     rec = _recorder(args, cfg)
+    stop: KeyboardInterrupt | None = None
     try:
         if rec is not None:
             _setup_static(rec, cfg, rig, photo, model, args.seed, {})
@@ -220,8 +236,12 @@ def _run_hardware(args, cfg) -> int:
             sc = run_realtime(cfg, args.duration, port=args.port, cameras=ReaderCameras(reader), model=model,
                               rig=rig, collect=args.collect, no_motion=args.no_motion, recorder=rec,
                               status=status, seed=args.seed, rt_priority=args.rt_priority)
+    except KeyboardInterrupt as e:  # Ctrl-C, SIGTERM, SIGHUP: the session stopped the arm in order
+        stop = e
     finally:
         status.close()
         if rec is not None:
             rec.close()
+    if stop is not None:
+        return report_stop("track", stop, _stopped(args, rec))
     return _report(args, sc, rec)

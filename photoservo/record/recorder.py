@@ -755,6 +755,11 @@ class Recorder:
         for stage, ms in timings_ms.items():
             self._queue_scalar(f"timing/{stage}_ms", t, frame, float(ms))
 
+    @property
+    def last_t(self) -> float:
+        """Session time (s) of the newest frame or estimate logged: where a closing event goes."""
+        return self._last_t
+
     def event(self, t: float, text: str, level: str = "INFO") -> None:
         """A line in the `events` text log (level: TRACE DEBUG INFO WARN ERROR CRITICAL)."""
         self._check()

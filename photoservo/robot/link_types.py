@@ -10,11 +10,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from photoservo.errors import InputError
+from photoservo.errors import HardwareError, InputError
 from photoservo.robot import protocol as P
 
 
-class LinkError(ConnectionError):
+class LinkError(HardwareError, ConnectionError):
     """The bridge refused a command, went silent, or went away. The message says what to do."""
 
 

@@ -21,6 +21,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import multiprocessing
+import signal
 import threading
 import time
 from collections import deque
@@ -399,16 +400,40 @@ def _render_process(cfg: Config, requests, frames) -> None:
     """The simulated cameras' renderer in its own process (its own core): builds the same scene
     as the session (`build_sim`, deterministic from the config) and renders each request
     (t_left, t_right, T_base_left, T_base_left_at_right) into a stereo pair."""
-    import signal
-
-    signal.signal(signal.SIGINT, signal.SIG_IGN)  # the session stops it
+    _ignore_stop_signals()  # the session stops it
     scene = build_sim(cfg).scene
     frames.send(("ready",))
     while True:
-        msg = requests.recv()
+        try:
+            msg = requests.recv()
+        except (EOFError, OSError):  # the session process is gone
+            return
         if msg is None:
             return
         frames.send(scene.render(*msg))
+
+
+STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
+
+
+def _ignore_stop_signals() -> None:
+    """In a child process: ignore Ctrl-C, SIGTERM and SIGHUP, which a terminal, `timeout` or
+    systemd send to the whole process group; the session process gets them too and stops its
+    children in order (the control process with a controlled stop and the servo off). The
+    parent blocks them while starting the child (`_start_child`), so none lands before this."""
+    for s in STOP_SIGNALS:
+        signal.signal(s, signal.SIG_IGN)
+    signal.pthread_sigmask(signal.SIG_UNBLOCK, STOP_SIGNALS)
+
+
+def _start_child(proc) -> None:
+    """Start a spawned child process with the stop signals blocked (the mask is inherited
+    through fork and exec), until the child ignores them itself (`_ignore_stop_signals`)."""
+    old = signal.pthread_sigmask(signal.SIG_BLOCK, STOP_SIGNALS)
+    try:
+        proc.start()
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, old)
 
 
 class SimCameras:
@@ -426,7 +451,7 @@ class SimCameras:
         self._frm_rx, self._frm_tx = ctx.Pipe(duplex=False)
         self._proc = ctx.Process(target=_render_process, args=(cfg, self._req_rx, self._frm_tx),
                                  name="photoservo-cameras", daemon=True)
-        self._proc.start()
+        _start_child(self._proc)
         if not self._frm_rx.poll(60.0):
             raise RuntimeError("the simulated cameras' renderer did not start within 60 s")
         self._frm_rx.recv()
@@ -477,8 +502,8 @@ class SimCameras:
         except (OSError, ValueError):
             pass
         self._proc.join(timeout=5.0)
-        if self._proc.is_alive():
-            self._proc.terminate()
+        if self._proc.is_alive():  # it ignores SIGTERM (_ignore_stop_signals)
+            self._proc.kill()
 
 
 class ReaderCameras:
@@ -554,13 +579,11 @@ def control_process(job: ControlJob, conn, stop) -> None:
     `Controller` at the control rate, takes tracks from `conn`, sends back each tick's joint state
     and decision, and ends — on `stop`, a fault or an exception — with a controlled stop and the
     servo off. Its last message is ("done", Scores, collected)."""
-    import signal
-
     from photoservo.robot.link import Link
 
-    # Ctrl-C reaches the whole process group: the vision process handles it and sets `stop`, so
-    # this loop ends in order (controlled stop, servo off) instead of dying mid-period
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    # Ctrl-C (and SIGTERM, SIGHUP) may reach the whole process group: the vision process handles
+    # it and sets `stop`, so this loop ends in order (controlled stop, servo off)
+    _ignore_stop_signals()
     cfg = job.cfg
     sc = Scores()
     ctrl = Controller(cfg.servo, Motion(cfg.motion, pa10.load_limits()), job.T_flange_left, job.centre,
@@ -639,7 +662,7 @@ def run_realtime(cfg: Config, duration_s: float, *, port: str, cameras, model, r
                      None if scene is None else scene.motion, None if scene is None else scene.size_mm(),
                      t0, settle_s, rt_priority, simulated)
     proc = ctx.Process(target=control_process, args=(job, child, child_stop), name="photoservo-control", daemon=True)
-    proc.start()
+    _start_child(proc)
     history = StateHistory()
     latest: dict = {}
     result: dict = {}
@@ -714,8 +737,8 @@ def run_realtime(cfg: Config, duration_s: float, *, port: str, cameras, model, r
         child_stop.set()
         rx.join(timeout=10.0)
         proc.join(timeout=5.0)
-        if proc.is_alive():
-            proc.terminate()
+        if proc.is_alive():  # it ignores SIGTERM (_ignore_stop_signals)
+            proc.kill()
         ctl = result.get("scores")
         if ctl is None:
             sc.faults.append("the control process ended without a report (the bridge watchdog stops the arm)")

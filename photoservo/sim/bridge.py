@@ -99,6 +99,7 @@ class BridgeModel:
         self.refused = 0
         self.refusals: dict[str, int] = {}  # refused setpoints by NACK error name
         self.watchdog_stops = 0  # controlled stops for want of setpoints
+        self.commands: dict[str, int] = {}  # SERVO_ON, SERVO_OFF, STOP, ESTOP received
         self.rx_crc_errors = 0
         self.t_tick = now  # bridge time of the last tick: when q, dq were "measured"
 
@@ -127,6 +128,9 @@ class BridgeModel:
             self.setpoint_seq = seq
             self.watchdog_fired = False
             return []
+        if isinstance(m, (P.Servo, P.Stop, P.EStop)):
+            name = ("SERVO_ON" if m.enable else "SERVO_OFF") if isinstance(m, P.Servo) else type(m).__name__.upper()
+            self.commands[name] = self.commands.get(name, 0) + 1
         if isinstance(m, P.Servo):
             if m.enable:
                 if self.fault in (P.Fault.ESTOP, P.Fault.LIMIT, P.Fault.INTERNAL):
@@ -237,6 +241,14 @@ class BridgeModel:
             self.stopping = False
             if self.disable_when_stopped:
                 self._brake(P.Fault.NONE)
+
+    def describe_end(self) -> str:
+        """One line: the commands received (SERVO_ON, STOP, SERVO_OFF, ESTOP), watchdog stops and
+        the arm's state now: what a session's end looked like from the bridge."""
+        cmds = ", ".join(f"{k} x{n}" for k, n in self.commands.items()) or "no commands"
+        state = "moving" if np.any(np.abs(self.dq) > 1e-6) else "still"
+        return (f"received {cmds}; watchdog stops {self.watchdog_stops}; arm {state}, "
+                f"servo {'on' if self.servo_on else 'off'}{', braked' if self.braked else ''}")
 
     def status(self) -> P.Status:
         s = P.Status(0)
