@@ -8,6 +8,7 @@ vision/, so vision never imports servo); `Config` only gathers them.
 
 from __future__ import annotations
 
+import math
 import os
 import tomllib
 from dataclasses import dataclass
@@ -108,7 +109,37 @@ def load_config_dict(path: str | os.PathLike | None = None, overrides: Sequence[
 
 def load_config(path: str | os.PathLike | None = None, overrides: Sequence[str] = (),
                 recorded: tuple[str, dict] | None = None) -> Config:
-    """The effective, validated configuration (`recorded`: see load_config_dict)."""
-    return build_dataclass(Config, load_config_dict(path, overrides, recorded), "")
+    """The effective, validated configuration (`recorded`: see load_config_dict): types by the
+    sections' dataclasses, ranges by configs/bounds.toml, then each section's validate()."""
+    doc = load_config_dict(path, overrides, recorded)
+    check_bounds(doc, read_toml(configs_dir() / "bounds.toml"))
+    return build_dataclass(Config, doc, "")
+
+
+def check_bounds(doc: dict, bounds: dict) -> None:
+    """Every number in `doc` (a config as raw TOML tables) finite and within its key's
+    [lowest, highest] in `bounds` (configs/bounds.toml; a list key's bound holds for each
+    element). InputError naming the key, the value and the bound. Non-numbers are left to the
+    type checks of build_dataclass."""
+    nan_ok = set(bounds.get("nan_means_unknown", ()))
+    for section, table in doc.items():
+        if not isinstance(table, dict):
+            continue
+        for key, value in table.items():
+            name = f"{section}.{key}"
+            values = value if isinstance(value, list) else [value]
+            nums = [v for v in values if isinstance(v, (int, float)) and not isinstance(v, bool)]
+            if not nums:
+                continue
+            lo, hi = bounds.get(section, {}).get(key, (None, None))
+            for v in nums:
+                if isinstance(v, float) and math.isnan(v) and name in nan_ok:
+                    continue
+                if not math.isfinite(v):
+                    raise InputError(f"config key '{name}' = {v}: must be a finite number"
+                                     + (f" within {lo:g}..{hi:g}" if lo is not None else ""))
+                if lo is not None and not lo <= v <= hi:
+                    raise InputError(f"config key '{name}' = {v if isinstance(v, int) else f'{v:g}'}: "
+                                     f"must be within {lo:g}..{hi:g}")
 
 

@@ -73,7 +73,7 @@ def add_config_options(p: argparse.ArgumentParser) -> None:
     """--config and --set, shared by every verb that reads the configuration."""
     p.add_argument("--config", metavar="CFG.toml", help="config file with the keys to change (see configs/default.toml)")
     p.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
-                   help="override one key, e.g. --set ga.population=60 (repeatable; bounds in configs/default.toml)")
+                   help="override one key, e.g. --set ga.population=60 (repeatable; ranges in configs/bounds.toml)")
 
 
 def add_recording_options(p: argparse.ArgumentParser, verb: str) -> None:
