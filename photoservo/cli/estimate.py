@@ -7,61 +7,38 @@ camera frame) and real size. With --json, exactly the estimate object of DESIGN.
 Exit status: 0 found, 1 not found, 2 bad input. Same seed and inputs, same pose (only
 "seconds" differs from run to run).
 
-Example:
-    photoservo estimate --rig scene/rig.toml --photo examples/photos/squid.png \\
-        --left scene/left.png --right scene/right.png --json --preview est.png
+Examples:
+    photoservo estimate --rig examples/scene/rig.toml --photo examples/scene/photo.png \\
+        --left examples/scene/left.png --right examples/scene/right.png --preview est.png
+    photoservo estimate --rig scene/rig.toml --photo scene/photo.png --left scene/left.png \\
+        --right scene/right.png --json --all --seed 7
 """
 
 from __future__ import annotations
 
 import argparse
-import json
 
 import cv2
 import numpy as np
 
-from photoservo.errors import InputError
-from photoservo.fileio import read_image, write_image_atomic
-from photoservo.cli.options import add_config_options
-from photoservo.config import Config, load_config
-from photoservo.vision.estimator import Estimate, estimate
-from photoservo.vision.fitness import project_model
-from photoservo.vision.photo_model import PhotoModel, load_photo_model, parse_roi
+from photoservo.cli.output import dumps_strict
+from photoservo.cli.options import add_config_options, add_stereo_inputs, load_stereo_inputs, output_image, seed
+from photoservo.config import load_config
+from photoservo.fileio import write_image_atomic
 from photoservo.geometry import heading_tilt_from_rotation
-from photoservo.vision.rig import Rig, load_rig
-
-
-def add_stereo_inputs(p: argparse.ArgumentParser) -> None:
-    """--rig, --photo, --roi, --left, --right: one photo and one stereo frame (estimate, scan)."""
-    p.add_argument("--rig", required=True, metavar="RIG.toml", help="calibrated stereo rig (DESIGN.md format)")
-    p.add_argument("--photo", required=True, metavar="PHOTO", help="one photo of the kind of creature sought")
-    p.add_argument("--roi", metavar="X,Y,W,H", help="region of the photo holding the creature (px), for cluttered photos")
-    p.add_argument("--left", required=True, metavar="L.png", help="left camera image")
-    p.add_argument("--right", required=True, metavar="R.png", help="right camera image")
-
-
-def load_stereo_inputs(args: argparse.Namespace, cfg: Config) -> tuple[Rig, PhotoModel, np.ndarray, np.ndarray]:
-    """(rig, photo-model, left BGR, right BGR) from the `add_stereo_inputs` options; InputError
-    naming the file when one is unreadable or an image's size is not the rig's."""
-    rig = load_rig(args.rig)
-    roi = parse_roi(args.roi) if args.roi else None
-    model = load_photo_model(args.photo, cfg.photo_model, roi)
-    left = read_image(args.left, "left image")
-    right = read_image(args.right, "right image")
-    for name, img, cam in (("left", left, rig.left), ("right", right, rig.right)):
-        if (img.shape[1], img.shape[0]) != tuple(cam.size):
-            raise InputError(f"{getattr(args, name)}: image is {img.shape[1]}x{img.shape[0]} px but the rig's "
-                             f"[{name}] size is {cam.size[0]}x{cam.size[1]}")
-    return rig, model, left, right
+from photoservo.vision.estimator import Estimate, estimate
+from photoservo.vision.photo_model import PhotoModel
+from photoservo.vision.rig import Rig, project_points
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     add_stereo_inputs(p)
     add_config_options(p)
-    p.add_argument("--seed", type=int, default=0, help="random seed of the GA (default 0)")
-    p.add_argument("--json", action="store_true", help="print only the estimate JSON object")
+    p.add_argument("--seed", type=seed, default=0, help="random seed of the GA (0..2^32-1, default 0)")
+    p.add_argument("--json", action="store_true", help="print only the estimate JSON object (strict JSON)")
     p.add_argument("--all", action="store_true", help="also list every candidate (key 'candidates' with --json)")
-    p.add_argument("--preview", metavar="OUT.png", help="write both images with the estimated model drawn on them")
+    p.add_argument("--preview", metavar="OUT.png", type=output_image,
+                   help="write both images side by side with the estimated model's outline drawn on them")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -71,7 +48,7 @@ def run(args: argparse.Namespace) -> int:
     if args.preview:
         write_image_atomic(args.preview, draw_estimate(left, right, model, rig, est))
     if args.json:
-        print(json.dumps(est.to_json(with_candidates=args.all)))
+        print(dumps_strict(est.to_json(with_candidates=args.all)))
     else:
         print(describe(est, args.all))
     return 0 if est.found else 1
@@ -102,10 +79,22 @@ def describe(est: Estimate, with_candidates: bool = False) -> str:
     return "\n".join(lines)
 
 
+def model_outline_mm(model: PhotoModel, alpha: float) -> list[np.ndarray]:
+    """The photo-model's outline (the target mask's outer contours) as model-frame points
+    (method step 2: pixel (u, v) from the origin -> (u/alpha, v/alpha, 0) mm), one (n, 3) array
+    per contour."""
+    contours, _ = cv2.findContours(model.mask, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_SIMPLE)
+    out = []
+    for c in contours:
+        uv = c.reshape(-1, 2).astype(np.float64) - np.asarray(model.origin_px)
+        out.append(np.column_stack([uv / alpha, np.zeros(len(uv))]))
+    return out
+
+
 def draw_estimate(left: np.ndarray, right: np.ndarray, model: PhotoModel, rig: Rig, est: Estimate) -> np.ndarray:
-    """Both images side by side with the estimated model's inner points (in their own hue, ringed
-    white) and outer points (dark) projected on them. Not found: the best candidate in grey,
-    labelled. BGR uint8."""
+    """Both images side by side with the estimated model's outline projected on them (a thin
+    line in the target's own hue over a dark one, so the creature stays visible). Not found:
+    the best candidate's outline in grey, labelled. BGR uint8."""
     imgs = [left.copy(), right.copy()]
     cand = None
     if est.found:
@@ -114,18 +103,21 @@ def draw_estimate(left: np.ndarray, right: np.ndarray, model: PhotoModel, rig: R
         c = est.candidates[0]
         cand = (np.array(c["rotation"]), np.array(c["position_mm"]), c["alpha_px_per_mm"])
     if cand is not None:
-        p = project_model(cand[0], cand[1], cand[2], model, rig)
-        hsv = np.stack([model.inner_hue, np.full_like(model.inner_hue, 255), np.full_like(model.inner_hue, 230)], -1)
-        cols = cv2.cvtColor(hsv[None].astype(np.uint8), cv2.COLOR_HSV2BGR)[0]
-        for img, inner, outer in ((imgs[0], p.inner_left[0], p.outer_left[0]), (imgs[1], p.inner_right[0], p.outer_right[0])):
-            for q in outer:
-                if np.all(np.isfinite(q)):
-                    cv2.circle(img, (round(q[0]), round(q[1])), 1, (40, 40, 40), -1)
-            for q, c in zip(inner, cols):
-                if np.all(np.isfinite(q)):
-                    colour = tuple(int(v) for v in c) if est.found else (160, 160, 160)
-                    cv2.circle(img, (round(q[0]), round(q[1])), 2, colour, -1)
-                    cv2.circle(img, (round(q[0]), round(q[1])), 2, (255, 255, 255), 1)
+        R, t, alpha = np.asarray(cand[0], float), np.asarray(cand[1], float), float(cand[2])
+        hue = int(np.median(model.inner_hue)) if len(model.inner_hue) else 0
+        colour = cv2.cvtColor(np.uint8([[[hue, 255, 255]]]), cv2.COLOR_HSV2BGR)[0, 0]
+        colour = tuple(int(v) for v in colour) if est.found else (190, 190, 190)
+        for X in model_outline_mm(model, alpha):
+            X_left = X @ R.T + t
+            X_right = X_left @ rig.R.T + rig.T
+            for img, cam, Xc in ((imgs[0], rig.left, X_left), (imgs[1], rig.right, X_right)):
+                uv = project_points(Xc, cam)
+                uv = uv[np.all(np.isfinite(uv), axis=1)]
+                if len(uv) < 2:
+                    continue
+                pts = np.round(uv).astype(np.int32).reshape(-1, 1, 2)
+                cv2.polylines(img, [pts], True, (0, 0, 0), 3, cv2.LINE_AA)
+                cv2.polylines(img, [pts], True, colour, 1, cv2.LINE_AA)
     label = (f"found  fitness {est.fitness:.3f}  z {est.position_mm[2]:.0f} mm  "
              f"size {est.size_mm[0]:.0f}x{est.size_mm[1]:.0f} mm" if est.found else "not found (best candidate in grey)")
     for img, name in zip(imgs, ("left", "right")):

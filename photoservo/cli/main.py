@@ -76,7 +76,10 @@ def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else argv
     verb = next((a for a in argv if not a.startswith("-")), None)
     parser = build_parser(verb if verb in VERBS else None)
-    args = parser.parse_args(argv)
+    try:
+        args = parser.parse_args(argv)
+    except SystemExit as e:  # --help, --version (0) or a bad argument (2, one line already printed)
+        return int(e.code or 0)
     if args.verb is None:
         parser.print_help(sys.stderr)
         return EXIT_BAD_INPUT

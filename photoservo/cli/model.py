@@ -4,7 +4,9 @@ Builds the photo-model (method steps 1-2, vision/photo_model.py) of one photo an
 found: target size, model origin, inner/outer point counts, target hues. With --preview, writes a
 PNG of the inner points (in their own hue) and outer points (grey) over the photo.
 
+Examples:
     photoservo model --photo examples/photos/squid.png --preview squid_model.png
+    photoservo model --photo harbour.jpg --roi 120,80,300,200 --set photo_model.interval_px=6
 """
 
 from __future__ import annotations
@@ -14,7 +16,7 @@ import argparse
 import numpy as np
 
 from photoservo.fileio import read_image, write_image_atomic
-from photoservo.cli.options import add_config_options
+from photoservo.cli.options import add_config_options, output_image
 from photoservo.config import load_config
 from photoservo.vision.photo_model import draw_photo_model, load_photo_model, parse_roi
 
@@ -22,7 +24,8 @@ from photoservo.vision.photo_model import draw_photo_model, load_photo_model, pa
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--photo", required=True, metavar="PHOTO", help="photo of the kind of creature")
     p.add_argument("--roi", metavar="X,Y,W,H", help="cluttered photo: GrabCut inside this rectangle (px)")
-    p.add_argument("--preview", metavar="OUT.png", help="write the model drawn over the photo")
+    p.add_argument("--preview", metavar="OUT.png", type=output_image,
+                   help="write the model drawn over the photo (.png or .jpg)")
     add_config_options(p)
 
 

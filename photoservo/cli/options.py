@@ -7,11 +7,14 @@ any work starts: one line naming the flag and the allowed range, exit status 2.
 from __future__ import annotations
 
 import argparse
+import logging
 import math
 import os
 from pathlib import Path
 
 from photoservo.errors import InputError
+
+log = logging.getLogger(__name__)
 
 SEED_MAX = 2**32 - 1  # numpy's SeedSequence takes any non-negative int; 32 bits is plenty to type
 
@@ -29,6 +32,10 @@ def _number(text: str, kind: type) -> float | int:
     return v
 
 
+def _fmt(v: float | int | None) -> str:
+    return str(v) if isinstance(v, int) else f"{v:g}"
+
+
 def bounded(kind: type, lo: float | None = None, hi: float | None = None, *, lo_open: bool = False,
             unit: str = ""):
     """An argparse type: an int or finite float within [lo, hi] (lo excluded when lo_open)."""
@@ -36,12 +43,13 @@ def bounded(kind: type, lo: float | None = None, hi: float | None = None, *, lo_
         v = _number(text, kind)
         low_bad = lo is not None and (v <= lo if lo_open else v < lo)
         if low_bad or (hi is not None and v > hi):
+            a, b = _fmt(lo), _fmt(hi)
             if lo is not None and hi is not None:
-                rng = f"within {lo:g}..{hi:g}" if not lo_open else f"> {lo:g} and <= {hi:g}"
+                rng = f"within {a}..{b}" if not lo_open else f"> {a} and <= {b}"
             elif lo is not None:
-                rng = f"> {lo:g}" if lo_open else f">= {lo:g}"
+                rng = f"> {a}" if lo_open else f">= {a}"
             else:
-                rng = f"<= {hi:g}"
+                rng = f"<= {b}"
             raise argparse.ArgumentTypeError(f"{text} must be {rng}{(' ' + unit) if unit else ''}")
         return v
 
@@ -67,6 +75,47 @@ def output_image(text: str) -> str:
 
 
 # ----------------------------------------------------------------------------- shared groups
+
+
+def add_stereo_inputs(p: argparse.ArgumentParser) -> None:
+    """--rig, --photo, --roi, --left, --right: one photo and one stereo frame (estimate, scan)."""
+    p.add_argument("--rig", required=True, metavar="RIG.toml", help="calibrated stereo rig (DESIGN.md format)")
+    p.add_argument("--photo", required=True, metavar="PHOTO", help="one photo of the kind of creature sought")
+    p.add_argument("--roi", metavar="X,Y,W,H", help="region of the photo holding the creature (px), for cluttered photos")
+    p.add_argument("--left", required=True, metavar="L.png", help="left camera image")
+    p.add_argument("--right", required=True, metavar="R.png", help="right camera image")
+
+
+def load_stereo_inputs(args: argparse.Namespace, cfg):
+    """(rig, photo-model, left BGR, right BGR) from the `add_stereo_inputs` options; InputError
+    naming the file when one is unreadable or an image's size is not the rig's."""
+    from photoservo.fileio import read_image
+    from photoservo.vision.photo_model import load_photo_model, parse_roi
+    from photoservo.vision.rig import load_rig
+
+    rig = load_rig(args.rig)
+    warn_baseline_sign(args.rig, rig)
+    roi = parse_roi(args.roi) if args.roi else None
+    model = load_photo_model(args.photo, cfg.photo_model, roi)
+    left = read_image(args.left, "left image")
+    right = read_image(args.right, "right image")
+    for name, img, cam in (("left", left, rig.left), ("right", right, rig.right)):
+        if (img.shape[1], img.shape[0]) != tuple(cam.size):
+            raise InputError(f"{getattr(args, name)}: image is {img.shape[1]}x{img.shape[0]} px but the rig's "
+                             f"[{name}] size is {cam.size[0]}x{cam.size[1]}")
+    return rig, model, left, right
+
+
+
+def warn_baseline_sign(path: str, rig) -> None:
+    """A rig whose right camera sits to the LEFT of the left one (T x > 0 in X_right = R X_left
+    + T) is almost always a swapped sign or swapped cameras; the search then finds nothing."""
+    if rig.T[0] > 0:
+        log.warning(f"{path}: [stereo] T x = {rig.T[0]:+.1f} mm puts the right camera {rig.T[0]:.0f} mm LEFT of "
+                    "the left one (X_right = R X_left + T, so T x is minus the baseline); if it is not, the "
+                    "sign of T or the left/right images are swapped")
+
+
 
 
 def add_config_options(p: argparse.ArgumentParser) -> None:

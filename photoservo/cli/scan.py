@@ -5,8 +5,12 @@
 Fitness distribution scans (the paper's fitness maps, vision/scan.py): the stereo fitness over
 (pose axis x alpha) slices through the pose in POSE.json (a ground truth or an estimate), one
 labelled heatmap PNG per axis in DIR (scan_<axis>.png) plus scan.json with the grids. Prints the
-peak of each map; a progress bar goes to stderr.
+peak of each map; a progress bar goes to stderr (on a terminal).
 
+Examples:
+    photoservo scan --rig examples/scene/rig.toml --photo examples/scene/photo.png \\
+        --left examples/scene/left.png --right examples/scene/right.png --pose examples/scene/truth.json \\
+        --out scans/ --axes z,ry --steps 41
     photoservo scan --rig rig.toml --photo squid.png --left left.png --right right.png \\
         --pose truth.json --out scans/
 """
@@ -14,15 +18,13 @@ peak of each map; a progress bar goes to stderr.
 from __future__ import annotations
 
 import argparse
-import json
-import sys
-import time
 from pathlib import Path
 
 from photoservo.errors import InputError
 from photoservo.fileio import write_image_atomic, write_text_atomic
-from photoservo.cli.options import add_config_options
-from photoservo.cli.estimate import add_stereo_inputs, load_stereo_inputs
+from photoservo.cli.options import add_config_options, bounded
+from photoservo.cli.output import dumps_strict, progress
+from photoservo.cli.options import add_stereo_inputs, load_stereo_inputs
 from photoservo.config import load_config
 from photoservo.vision.fitness import stereo_hue
 from photoservo.vision.scan import AXES, draw_slice, load_pose, scan_slice
@@ -33,32 +35,14 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--pose", required=True, metavar="POSE.json", help="estimate or ground-truth JSON to scan around")
     p.add_argument("--out", required=True, metavar="DIR", help="folder for scan_<axis>.png and scan.json")
     p.add_argument("--axes", default="x,y,z,rx,ry,rz", help="comma-separated axes among " + ",".join(AXES))
-    p.add_argument("--steps", type=int, default=81, help="cells per map side (default 81)")
-    p.add_argument("--span-mm", type=float, default=60.0, help="position axes scan +-this (mm, default 60)")
-    p.add_argument("--span-deg", type=float, default=45.0, help="orientation axes scan +-this (deg, default 45)")
-    p.add_argument("--alpha-factor", type=float, default=2.0,
+    p.add_argument("--steps", type=bounded(int, 3, 401), default=81, help="cells per map side (3..401, default 81)")
+    p.add_argument("--span-mm", type=bounded(float, 0.0, 10000.0, lo_open=True, unit="mm"), default=60.0,
+                   help="position axes scan +-this (mm, default 60)")
+    p.add_argument("--span-deg", type=bounded(float, 0.0, 180.0, lo_open=True, unit="deg"), default=45.0,
+                   help="orientation axes scan +-this (deg, default 45)")
+    p.add_argument("--alpha-factor", type=bounded(float, 1.0, 100.0, lo_open=True), default=2.0,
                    help="alpha runs from alpha/K to alpha*K, log-spaced (default 2)")
     add_config_options(p)
-
-
-class _Bar:
-    """A one-line progress bar on stderr."""
-
-    def __init__(self, total: int, width: int = 30) -> None:
-        self.total, self.width, self.done, self.t0 = total, width, 0, time.monotonic()
-
-    def step(self, label: str) -> None:
-        self.done += 1
-        pct = 100 * self.done // self.total
-        if pct == 100 * (self.done - 1) // self.total and self.done != self.total:
-            return  # redraw only when the percentage changes
-        k = self.width * self.done // self.total
-        el = time.monotonic() - self.t0
-        sys.stderr.write(f"\rscan {label:<3} [{'#' * k}{'.' * (self.width - k)}] "
-                         f"{pct:3d}% {el:5.1f}s")
-        if self.done == self.total:
-            sys.stderr.write("\n")
-        sys.stderr.flush()
 
 
 def run(args: argparse.Namespace) -> int:
@@ -66,28 +50,22 @@ def run(args: argparse.Namespace) -> int:
     bad = [a for a in axes if a not in AXES]
     if not axes or bad:
         raise InputError(f"--axes '{args.axes}': each must be one of {', '.join(AXES)}")
-    if not 3 <= args.steps <= 401:
-        raise InputError(f"--steps {args.steps}: must be within 3..401")
-    for name, v in (("--span-mm", args.span_mm), ("--span-deg", args.span_deg)):
-        if not v > 0:
-            raise InputError(f"{name} {v}: must be > 0")
-    if not args.alpha_factor > 1:
-        raise InputError(f"--alpha-factor {args.alpha_factor}: must be > 1")
     cfg = load_config(args.config, args.overrides)
     rig, model, left, right = load_stereo_inputs(args, cfg)
     R0, t0, alpha0 = load_pose(args.pose)
     frame = stereo_hue(left, right, cfg.fitness)
 
     out = Path(args.out)
-    bar = _Bar(len(axes) * args.steps)
     results = []
-    for axis in axes:
-        span = args.span_mm if AXES[axis][0] == "mm" else args.span_deg
-        s = scan_slice(axis, R0, t0, alpha0, model, frame, rig, cfg.fitness, span, args.alpha_factor,
-                       args.steps, progress=lambda done, total, a=axis: bar.step(a))
-        png = out / f"scan_{axis}.png"
-        write_image_atomic(png, draw_slice(s, f"fitness: {axis} x alpha around {Path(args.pose).name}"))
-        results.append((s, png))
+    with progress(len(axes) * args.steps, "scan", unit="row") as bar:
+        for axis in axes:
+            bar.set_description(f"scan {axis}")
+            span = args.span_mm if AXES[axis][0] == "mm" else args.span_deg
+            s = scan_slice(axis, R0, t0, alpha0, model, frame, rig, cfg.fitness, span, args.alpha_factor,
+                           args.steps, progress=lambda done, total: bar.update(1))
+            png = out / f"scan_{axis}.png"
+            write_image_atomic(png, draw_slice(s, f"fitness: {axis} x alpha around {Path(args.pose).name}"))
+            results.append((s, png))
     summary = {"pose": {"position_mm": t0.tolist(), "rotation": R0.tolist(), "alpha_px_per_mm": alpha0},
                "maps": []}
     for s, png in results:
@@ -98,5 +76,5 @@ def run(args: argparse.Namespace) -> int:
                                 "peak": {"offset": d, "alpha_px_per_mm": a, "fitness": f},
                                 "offsets": s.offsets.tolist(), "alphas": s.alphas.tolist(),
                                 "fitness": s.fitness.round(5).tolist()})
-    write_text_atomic(out / "scan.json", json.dumps(summary))
+    write_text_atomic(out / "scan.json", dumps_strict(summary))
     return 0

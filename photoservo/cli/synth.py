@@ -13,8 +13,10 @@ Writes DIR/left.png, DIR/right.png, DIR/rig.toml (the rig the estimator is told)
 (ground truth in the estimate-JSON shape, for the photo in DIR/photo.png) and DIR/photo.png
 (the photo the estimator should use), each atomically.
 
+Examples:
     photoservo synth --specimen squid --seed 3 --distance 700 --out scene/
     photoservo synth --generator harbour --specimen fish --many-hued --seed 3 --out scene/
+    photoservo synth --specimen crab --other --effects all --distractor --out hard/
     photoservo estimate --rig scene/rig.toml --photo scene/photo.png --left scene/left.png --right scene/right.png
 """
 
@@ -26,7 +28,7 @@ from pathlib import Path
 
 from photoservo.errors import InputError
 from photoservo.fileio import read_image, write_image_atomic, write_text_atomic
-from photoservo.cli.options import add_config_options
+from photoservo.cli.options import add_config_options, bounded, seed
 from photoservo.config import load_config
 from photoservo.vision.photo_model import load_photo_model
 from photoservo.vision.rig import dump_rig, load_rig
@@ -62,9 +64,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                        help="with --specimen: the estimator gets a photo of ANOTHER individual")
     other.add_argument("--estimator-photo", metavar="PHOTO2",
                        help="the photo the estimator gets (another individual of the same kind)")
-    p.add_argument("--seed", type=int, default=0, help="scene seed (default 0)")
-    p.add_argument("--distance", type=float, metavar="MM", help="target depth in the left camera (mm)")
-    p.add_argument("--tilt-deg", type=float, metavar="DEG", help="angle between target normal and optical axis")
+    p.add_argument("--seed", type=seed, default=0, help="scene seed (0..2^32-1, default 0)")
+    p.add_argument("--distance", type=bounded(float, 50, 100000, unit="mm"), metavar="MM",
+                   help="target depth in the left camera (50..100000 mm; default: random in [synthetic] distance_mm)")
+    p.add_argument("--tilt-deg", type=bounded(float, 0, 75, unit="deg"), metavar="DEG",
+                   help="angle between target normal and optical axis (0..75 deg; default random)")
     p.add_argument("--empty", action="store_true", help="no creature: empty water (truth found=false)")
     p.add_argument("--distractor", action="store_true", help="add a look-alike elsewhere in view")
     p.add_argument("--effects", default=",".join(DEFAULT_EFFECTS), metavar="LIST",
@@ -81,10 +85,6 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     cfg = load_config(args.config, args.overrides)
     effects = parse_effects(args.effects)
-    if args.distance is not None and not 50 <= args.distance <= 100000:
-        raise InputError(f"--distance {args.distance}: must be within 50..100000 mm")
-    if args.tilt_deg is not None and not 0 <= args.tilt_deg <= 75:
-        raise InputError(f"--tilt-deg {args.tilt_deg}: must be within 0..75 degrees")
     if args.other and args.photo:
         raise InputError("--other: only with --specimen; give --estimator-photo PHOTO2 with --photo")
     if args.generator == "harbour":

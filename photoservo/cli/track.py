@@ -33,7 +33,7 @@ import sys
 
 from photoservo import __version__
 from photoservo.errors import EXIT_HARDWARE, InputError
-from photoservo.cli.options import add_config_options
+from photoservo.cli.options import add_config_options, bounded, rt_priority, seed
 from photoservo.cli.output import dumps_strict
 from photoservo.cli.signals import report_stop
 from photoservo.config import load_config
@@ -42,7 +42,7 @@ from photoservo.tomlconf import dump_config
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--sim", action="store_true", help="run on the built-in simulator (default without hardware)")
-    p.add_argument("--duration", type=float, default=None, metavar="S",
+    p.add_argument("--duration", type=bounded(float, 0.0, 86400.0, lo_open=True, unit="s"), default=None, metavar="S",
                    help="session length (s, default 20; with --world-from the recorded run's)")
     p.add_argument("--no-motion", action="store_true", help="track without commanding the arm")
     p.add_argument("--collect", action="store_true", help="collect the target once the hold is steady")
@@ -56,9 +56,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     view = p.add_mutually_exclusive_group()
     view.add_argument("--view", action="store_true", help="spawn the Rerun viewer while recording")
     view.add_argument("--connect", metavar="URL", help="stream to a running Rerun viewer as well")
-    p.add_argument("--rt-priority", type=int, metavar="N",
+    p.add_argument("--rt-priority", type=rt_priority, metavar="N",
                    help="run the control loop with SCHED_FIFO priority N (1..99; needs the permission)")
-    p.add_argument("--seed", type=int, default=None, help="tracker seed (default 0; with --world-from the recorded one)")
+    p.add_argument("--seed", type=seed, default=None,
+                   help="tracker seed (0..2^32-1; default 0; with --world-from the recorded one)")
     p.add_argument("--world-from", metavar="REC.rrd",
                    help="simulation: the world, config and seeds of a simulated recording, closed loop with "
                         "the --config/--set changes; prints the comparison with the recorded run")
@@ -106,10 +107,6 @@ def run(args: argparse.Namespace) -> int:
     args.duration = 20.0 if args.duration is None else args.duration
     args.seed = 0 if args.seed is None else args.seed
     cfg = load_config(args.config, args.overrides)
-    if args.duration <= 0:
-        raise InputError(f"--duration {args.duration}: must be > 0 s")
-    if args.rt_priority is not None and not 1 <= args.rt_priority <= 99:
-        raise InputError(f"--rt-priority {args.rt_priority}: must be in 1..99")
     hardware = bool(args.port) or cfg.cameras.kind != "none"
     if hardware and args.sim:
         raise InputError("--sim cannot be combined with --port or a configured [cameras] source")

@@ -30,6 +30,7 @@ from photoservo.vision.rig import Camera
 # printed with DICT_4X4_50 / _100.
 DEFAULT_DICTIONARY = "DICT_4X4_250"
 MIN_CHARUCO_CORNERS = 6
+MAX_CORNERS_PER_SIDE = 100  # a board with more is not printable, nor detectable at camera resolution
 
 
 @dataclass(frozen=True)
@@ -45,10 +46,11 @@ class Board:
     dictionary: str = DEFAULT_DICTIONARY
 
     def __post_init__(self) -> None:
-        if self.cols < 2 or self.rows < 2:
-            raise InputError(f"board: needs at least 2x2 inner corners, got {self.cols}x{self.rows}")
-        if not self.square_mm > 0:
-            raise InputError(f"board: square size must be > 0 mm, got {self.square_mm}")
+        if not (2 <= self.cols <= MAX_CORNERS_PER_SIDE and 2 <= self.rows <= MAX_CORNERS_PER_SIDE):
+            raise InputError(f"board: needs 2..{MAX_CORNERS_PER_SIDE} inner corners per side, "
+                             f"got {self.cols}x{self.rows}")
+        if not 0 < self.square_mm <= 1000:
+            raise InputError(f"board: square size must be within 0..1000 mm, got {self.square_mm}")
         if self.charuco:
             if self.marker_mm == 0.0:
                 object.__setattr__(self, "marker_mm", 0.7 * self.square_mm)
@@ -56,6 +58,11 @@ class Board:
                 raise InputError(f"board: marker size must be in (0, square), got {self.marker_mm} mm")
             if not hasattr(cv2.aruco, self.dictionary):
                 raise InputError(f"board: unknown ArUco dictionary '{self.dictionary}'")
+            n_markers = (self.cols + 1) * (self.rows + 1) // 2
+            size = int(self.dictionary.rsplit("_", 1)[-1]) if self.dictionary.rsplit("_", 1)[-1].isdigit() else None
+            if size is not None and n_markers > size:
+                raise InputError(f"board: a {self.cols}x{self.rows} ChArUco board needs {n_markers} markers, "
+                                 f"more than {self.dictionary} has ({size})")
 
     @classmethod
     def parse(cls, text: str, square_mm: float, charuco: bool = False, marker_mm: float = 0.0,
