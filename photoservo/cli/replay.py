@@ -21,7 +21,7 @@ import json
 import math
 import sys
 
-from photoservo.cli.options import add_config_options
+from photoservo.cli.options import add_config_options, check_display
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -38,6 +38,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     from photoservo.record.replay import load_replay, replay
 
+    if args.view:
+        check_display("--view")
     setup = load_replay(args.recording, args.config, args.overrides, args.fixed_generations)
     n = len(setup.recording.frames)
     quiet = args.json

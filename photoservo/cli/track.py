@@ -33,7 +33,7 @@ import sys
 
 from photoservo import __version__
 from photoservo.errors import EXIT_HARDWARE, InputError
-from photoservo.cli.options import add_config_options, bounded, rt_priority, seed
+from photoservo.cli.options import add_config_options, bounded, check_display, rt_priority, seed
 from photoservo.cli.output import dumps_strict
 from photoservo.cli.signals import report_stop
 from photoservo.config import load_config
@@ -100,6 +100,8 @@ class _StatusLine:
 
 
 def run(args: argparse.Namespace) -> int:
+    if args.view:
+        check_display("--view")
     if args.world_from:
         from photoservo.record.replay import track_world_from
 

@@ -1,0 +1,156 @@
+"""The CLI contract over every verb (issue 12): bad input -> exit status 2, exactly one line on
+stderr naming the problem, no traceback, nothing written. In process (fast) for the tables,
+hypothesis over numeric arguments and config overrides, and a few rows as a new user runs them
+(a subprocess of `python -m photoservo.cli`)."""
+
+from __future__ import annotations
+
+import json
+import math
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from photoservo.cli.main import VERBS, main
+from photoservo.tomlconf import configs_dir, read_toml
+
+ROOT = Path(__file__).resolve().parents[1]
+S = ROOT / "examples" / "scene"
+STEREO = ["--rig", str(S / "rig.toml"), "--photo", str(S / "photo.png"), "--left", str(S / "left.png"),
+          "--right", str(S / "right.png")]
+NOPE = "/nonexistent/x"
+
+# verb -> bad command lines, each with a word the one line must contain
+BAD: dict[str, list[tuple[list[str], str]]] = {
+    "track": [(["--duration", "0"], "--duration"), (["--duration", "inf"], "finite"),
+              (["--seed", "-1"], "--seed"), (["--rt-priority", "0"], "--rt-priority"),
+              (["--set", "ga.population=1000000000000"], "ga.population"),
+              (["--set", "motion.tool_speed_max_mm_s=inf"], "tool_speed_max_mm_s"),
+              (["--config", NOPE], NOPE), (["--record", "a.rrd", "--no-record"], "not allowed"),
+              (["--bogus"], "--bogus"), (["--sim", "--port", "/dev/null"], "--sim")],
+    "estimate": [(STEREO + ["--seed", "-1"], "--seed"), (STEREO + ["--preview", "out.xyz"], ".xyz"),
+                 (STEREO + ["--preview", "/tmp"], "folder"), (STEREO[:2] + ["--photo", str(S)] + STEREO[4:], "folder"),
+                 (STEREO[:6] + ["--right", NOPE], NOPE), (STEREO + ["--roi", "1,2,3"], "--roi"),
+                 (STEREO[2:], "--rig"), (STEREO + ["--set", "ga.elite=-1"], "ga.elite")],
+    "model": [(["--photo", NOPE], NOPE), (["--photo", str(S / "photo.png"), "--preview", "x.txt"], ".txt"),
+              (["--photo", str(S / "rig.toml")], "not a readable image")],
+    "synth": [(["--specimen", "squid", "--seed", "-1", "--out", "x"], "--seed"),
+              (["--specimen", "eel", "--out", "x"], "eel"),
+              (["--specimen", "squid", "--distance", "nan", "--out", "x"], "finite"),
+              (["--specimen", "squid", "--effects", "snow", "--out", "x"], "snow")],
+    "scan": [(STEREO + ["--pose", str(S / "truth.json"), "--out", "x", "--steps", "2"], "--steps"),
+             (STEREO + ["--pose", str(S / "truth.json"), "--out", "x", "--axes", "w"], "--axes"),
+             (STEREO + ["--pose", NOPE, "--out", "x"], NOPE)],
+    "calibrate": [(["board", "--board", "10000x10000", "--square-mm", "25", "--out", "b.png"], "100"),
+                  (["board", "--board", "9x6", "--square-mm", "-1", "--out", "b.png"], "square"),
+                  (["board", "--board", "9", "--square-mm", "25", "--out", "b.png"], "COLSxROWS"),
+                  (["stereo", "--left", NOPE, "--right", NOPE, "--board", "9x6", "--square-mm", "25"], NOPE),
+                  (["hand-eye", "--rig", NOPE, "--views", NOPE, "--board", "9x6", "--square-mm", "25"], NOPE),
+                  (["water", "--rig", str(S / "rig.toml"), "--views", "x", "--board", "9x6", "--square-mm", "25"],
+                   "hand_eye"),
+                  (["capture", "--out", "x", "--interval", "-1"], "--interval"),
+                  (["capture", "--videos", NOPE, NOPE, "--out", "x", "--count", "1"], NOPE),
+                  (["frobnicate"], "frobnicate")],
+    "replay": [([NOPE], NOPE), ([str(S / "rig.toml")], "rig.toml")],
+    "move": [(["--port", NOPE, "--home"], NOPE), (["--port", NOPE, "--joints", "1", "2"], "--joints"),
+             (["--port", NOPE, "--home", "--speed", "0"], "--speed"),
+             (["--port", NOPE, "--joints", *["nan"] * 7], "finite"),
+             (["--port", NOPE, "--joints", "0", "95", "0", "60", "0", "90", "0"], "S2")],
+    "pa10-sim": [(["--drop", "1.5"], "--drop"), (["--baud", "-1"], "--baud"),
+                 (["--seed", "x"], "--seed"), (["--set", "emulator.state_hz=500"], "state_hz")],
+    "config": [(["show", "--set", "nosuch.key=1"], "nosuch"), (["show", "--set", "ga.population"], "ga.population"),
+               (["list"], "list")],
+}
+
+
+def _one_line(rc: int, err: str, word: str, argv: list[str]) -> None:
+    lines = [ln for ln in err.splitlines() if ln.strip()]
+    assert rc == 2, (argv, rc, err)
+    assert len(lines) == 1, (argv, err)
+    assert "Traceback" not in err and word in lines[0], (argv, err)
+
+
+def test_every_verb_has_a_table():
+    assert set(VERBS) <= set(BAD) | {"find-cameras", "find-port"}
+
+
+@pytest.mark.parametrize("verb, argv, word", [(v, a, w) for v, rows in BAD.items() for a, w in rows])
+def test_bad_input_is_one_line_exit_2(verb, argv, word, capsys, tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)  # nothing may be written; check the folder stays empty
+    rc = main([verb, *argv])
+    cap = capsys.readouterr()
+    _one_line(rc, cap.err, word, [verb, *argv])
+    assert list(tmp_path.iterdir()) == [], "a refused command wrote files"
+
+
+@pytest.mark.parametrize("argv, word", [
+    (["estimate", "--seed", "-1", *STEREO], "--seed"),
+    (["calibrate", "board", "--board", "10000x10000", "--square-mm", "25", "--out", "b.png"], "100"),
+    (["config", "show", "--set", "ga.population=1000000000000"], "ga.population"),
+    (["track", "--view", "--sim", "--duration", "1"], "--view"),
+])
+def test_as_a_new_user_runs_it(argv, word, tmp_path):
+    env = {k: v for k, v in __import__("os").environ.items() if k not in ("DISPLAY", "WAYLAND_DISPLAY")}
+    r = subprocess.run([sys.executable, "-m", "photoservo.cli", *argv], cwd=tmp_path, env=env,
+                       capture_output=True, text=True, timeout=120)
+    _one_line(r.returncode, r.stderr, word, argv)
+    assert r.stdout == "" and list(tmp_path.iterdir()) == []
+
+
+SETTINGS = settings(max_examples=60, deadline=None, derandomize=True,
+                    suppress_health_check=[HealthCheck.function_scoped_fixture])
+NUM_TEXT = st.one_of(st.floats(allow_nan=True, allow_infinity=True).map(repr), st.integers(-10**20, 10**20).map(str),
+                     st.sampled_from(["", "x", "1e999", "-0", "0x10", "1_000"]))
+
+
+@SETTINGS
+@given(joints=st.lists(NUM_TEXT, min_size=7, max_size=7), speed=NUM_TEXT)
+def test_move_arguments_never_crash(joints, speed, capsys):
+    """Any joints and speed against a port that does not exist: always refused before the port,
+    or at it, with one line."""
+    rc = main(["move", "--port", NOPE, "--joints", *joints, "--speed", speed, "--no-record"])
+    cap = capsys.readouterr()
+    _one_line(rc, cap.err, "", ["move"])
+
+
+def _config_keys():
+    doc = read_toml(configs_dir() / "default.toml")
+    return sorted(f"{s}.{k}" for s, t in doc.items() for k in t)
+
+
+VALUES = st.one_of(NUM_TEXT, st.sampled_from(["true", '"abc"', "[1, 2]", "[1e400, 0]", "nan", "-inf", "{}"]))
+
+
+@SETTINGS
+@given(key=st.sampled_from(_config_keys()), value=VALUES)
+def test_any_config_override_is_accepted_or_one_line(key, value, capsys):
+    """Every key, any value: either a valid config (exit 0, and every number in it finite unless
+    it means unknown) or one line naming the key (exit 2)."""
+    rc = main(["config", "show", "--set", f"{key}={value}"])
+    cap = capsys.readouterr()
+    if rc == 0:
+        import tomllib
+
+        shown = tomllib.loads(cap.out)
+        sec, k = key.split(".")
+        v = shown[sec][k]
+        for x in v if isinstance(v, list) else [v]:
+            assert not isinstance(x, float) or math.isfinite(x) or key == "tracker.water_z_mm", (key, value, x)
+    else:
+        _one_line(rc, cap.err, key.split(".")[0], [key, value])
+
+
+def test_json_outputs_are_strict(capsys):
+    """--json output parses with a parser that rejects NaN and Infinity."""
+    def strict(text: str):
+        return json.loads(text, parse_constant=lambda c: (_ for _ in ()).throw(ValueError(c)))
+
+    rc = main(["estimate", *STEREO, "--json", "--set", "estimator.threshold=10.0"])  # nothing can pass
+    out = capsys.readouterr().out
+    assert rc == 1
+    js = strict(out)
+    assert js["found"] is False and js["position_mm"] is None
