@@ -3,7 +3,7 @@
 
 Exit status (every verb; README "Exit status"):
     0    ok / found
-    1    not found (estimate)
+    1    not found (estimate: no creature; find-cameras, find-port: nothing found)
     2    bad input: one line naming the file, key, flag or value; nothing half-written
     3    hardware or link failure (a bridge gone silent, a camera that stopped); the arm is stopped
     128+N  ended by signal N after a controlled stop: 130 Ctrl-C, 143 SIGTERM, 129 SIGHUP
@@ -35,6 +35,8 @@ VERBS: dict[str, tuple[str, str]] = {
     "move": ("photoservo.cli.move", "move the arm to joint angles (deg) or home through the bridge, jerk-limited"),
     "pa10-sim": ("photoservo.cli.pa10_sim", "PA-10 serial-bridge emulator on a pty (prints the device path)"),
     "tune": ("photoservo.cli.tune", "tune config keys automatically: an Optuna study on simulated worlds and recordings"),
+    "find-cameras": ("photoservo.cli.find_cameras", "list the cameras and video sources OpenCV can open, one snapshot each"),
+    "find-port": ("photoservo.cli.find_port", "list serial ports and find the one the arm's bridge answers on"),
     "config": ("photoservo.cli.config", "print the effective configuration"),
 }
 

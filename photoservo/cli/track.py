@@ -21,15 +21,17 @@ Examples:
     photoservo track --sim --duration 20
     photoservo track --sim --duration 20 --collect --set sim.drift_mm_s=[20.0,10.0]
     photoservo track --sim --world-from logs/X_track.rrd --set servo.k_position=1.0   # same world, new gain
-    photoservo track --rig rig.toml --photo squid.jpg --port /dev/ttyUSB0 --set cameras.kind=\\"devices\\" ...
+    photoservo track --rig rig.toml --photo squid.jpg --port /dev/ttyUSB0 --cameras 0 1
 """
 
 from __future__ import annotations
 
 import argparse
 import dataclasses
+import logging
 import math
 import sys
+from pathlib import Path
 
 from photoservo import __version__
 from photoservo.errors import EXIT_HARDWARE, InputError
@@ -49,7 +51,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--lockstep", action="store_true", help="simulation on its own clock (deterministic)")
     p.add_argument("--rig", metavar="RIG.toml", help="hardware: calibrated rig with [hand_eye]")
     p.add_argument("--photo", metavar="PHOTO", help="hardware: the photo of the creature to find")
-    p.add_argument("--port", metavar="PORT", help="hardware: the bridge's serial port or pyserial URL")
+    p.add_argument("--port", metavar="PORT",
+                   help="hardware: the bridge's serial port or pyserial URL (`photoservo find-port`)")
+    p.add_argument("--cameras", nargs=2, metavar=("LEFT", "RIGHT"),
+                   help="hardware: the two OpenCV devices, index or path (`photoservo find-cameras`); "
+                        "sets [cameras] kind = \"devices\", left, right")
     rec = p.add_mutually_exclusive_group()
     rec.add_argument("--record", metavar="OUT.rrd", help="recording path (default logs/<UTC time>_track.rrd)")
     rec.add_argument("--no-record", action="store_true", help="do not record")
@@ -67,36 +73,52 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     add_config_options(p)
 
 
-class _StatusLine:
-    """Live status on stderr: one rewritten line on a terminal, a line per second otherwise."""
+def _num(v, fmt: str, unit: str = "") -> str:
+    """A number for the status line, '-' when there is none yet (never 'nan')."""
+    if v is None or (isinstance(v, float) and not math.isfinite(v)):
+        return "-"
+    return f"{v:{fmt}}{unit}"
 
-    def __init__(self) -> None:
+
+class _StatusLine:
+    """Live status on stderr: one rewritten line on a terminal, a line per second otherwise,
+    nothing under -q. Names the phase (servo, descend, grasp, ascend, done; "watching" under
+    --no-motion) and remembers what the report needs (the last phase, whether a descent began)."""
+
+    def __init__(self, no_motion: bool = False) -> None:
         self.tty = sys.stderr.isatty()
+        self.show = logging.getLogger().isEnabledFor(logging.INFO)
+        self.no_motion = no_motion
         self.last = -1.0
+        self.phase = ""
+        self.descended = False
+        self.drawn = False
 
     def __call__(self, d: dict) -> None:
-        if not self.tty and d["t"] - self.last < 1.0:
+        self.phase = d["phase"]
+        self.descended |= d["phase"] in ("descend", "grasp", "ascend")
+        if not self.show or (not self.tty and d["t"] - self.last < 1.0):
             return
         self.last = d["t"]
         pos = d.get("position_mm")
         pos_s = "-" if pos is None else "(" + ", ".join(f"{x:.0f}" for x in pos) + ") mm"
-        fit = d.get("fitness")
-        err = d.get("error_mm")
-        rate = f"{d['fps']:4.1f} fps" if "fps" in d else "lockstep"  # simulated clock: no wall rate
-        line = (f"t {d['t']:5.1f} s | {rate} | {d['status']:<9} "
-                f"fit {(fit if fit is not None and math.isfinite(fit) else float('nan')):.2f} | "
-                f"pos {pos_s} | alpha {d['alpha'] or float('nan'):.2f} | "
-                f"err {err:.0f} mm {d['yaw_deg']:.1f} deg | {d['phase']}"
-                + (f" | stop: {d['stop']}" if d.get("stop") else "")
+        rate = _num(d.get("fps"), "4.1f", " fps") if "fps" in d else "lockstep"  # simulated clock: no wall rate
+        phase = "watching" if self.no_motion else d["phase"]
+        line = (f"t {d['t']:5.1f} s | {rate} | {d['status']:<9} fit {_num(d.get('fitness'), '.2f')} | "
+                f"pos {pos_s} | alpha {_num(d.get('alpha'), '.2f')} | "
+                f"err {_num(d.get('error_mm'), '.0f', ' mm')} {_num(d.get('yaw_deg'), '.1f', ' deg')} | {phase}"
+                + (f" | stop: {d['stop']}" if d.get("stop") and not self.no_motion else "")
                 + (f" | {d['link'].text()}" if d.get("link") else ""))
+        self.drawn = True
         if self.tty:
             print("\r" + line[:160].ljust(160), end="", file=sys.stderr, flush=True)
         else:
             print(line, file=sys.stderr, flush=True)
 
     def close(self) -> None:
-        if self.tty:
+        if self.tty and self.drawn:
             print(file=sys.stderr)
+            self.drawn = False
 
 
 def run(args: argparse.Namespace) -> int:
@@ -109,6 +131,10 @@ def run(args: argparse.Namespace) -> int:
     args.duration = 20.0 if args.duration is None else args.duration
     args.seed = 0 if args.seed is None else args.seed
     cfg = load_config(args.config, args.overrides)
+    if args.cameras:
+        cams = dataclasses.replace(cfg.cameras, kind="devices", left=args.cameras[0], right=args.cameras[1])
+        cams.validate("cameras")
+        cfg = dataclasses.replace(cfg, cameras=cams)
     hardware = bool(args.port) or cfg.cameras.kind != "none"
     if hardware and args.sim:
         raise InputError("--sim cannot be combined with --port or a configured [cameras] source")
@@ -132,7 +158,21 @@ def _setup_static(rec, cfg, rig, photo, model, seed: int, extra: dict) -> None:
                          {"photoservo": __version__})
 
 
-def _report(args, sc, rec) -> int:
+def _collection(s: dict, cfg, status: _StatusLine) -> str:
+    """Whether the creature was collected, and if not, why (the report's one line)."""
+    if s["collected"]:
+        return "collected"
+    if s["faults"]:
+        return "not completed: a fault stopped the session (below)"
+    if status.descended:
+        return "not completed: the descent was aborted (target lost) and the arm climbed back"
+    sv = cfg.servo
+    return (f"not completed: the hold never stayed within {sv.hold_tolerance_mm:g} mm and "
+            f"{sv.hold_tolerance_deg:g} deg for {sv.hold_time_s:g} s before the session ended "
+            f"(last phase: {status.phase or 'none'}; a longer --duration, or [servo] hold_* keys)")
+
+
+def _report(args, sc, rec, cfg, status) -> int:
     s = sc.summary()
     if rec is not None:
         s["recording"] = _recording_files(rec)
@@ -141,7 +181,9 @@ def _report(args, sc, rec) -> int:
     else:
         t = s["timings_ms_median"]
         print(f"frames {s['frames']}, found {100 * s['found_ratio']:.0f} %, lost {s['lost_events']}, "
-              f"acquisitions {s['acquisitions']}, collected {s['collected']}")
+              f"acquisitions {s['acquisitions']}")
+        if args.collect:
+            print(f"collection: {_collection(s, cfg, status)}")
         if not math.isnan(s["rms_position_error_mm"]):
             print(f"hold vs truth (after settling): {s['rms_position_error_mm']:.1f} mm RMS, "
                   f"{s['rms_yaw_error_deg']:.2f} deg RMS yaw")
@@ -171,7 +213,7 @@ def _run_sim(args, cfg) -> int:
     if args.lockstep:  # the recorded effective config then says how the run was clocked (replay reads it)
         cfg = dataclasses.replace(cfg, sim=dataclasses.replace(cfg.sim, lockstep=True))
     sim = build_sim(cfg)
-    status = _StatusLine()
+    status = _StatusLine(args.no_motion)
     rec = _recorder(args, cfg)
     stop: KeyboardInterrupt | None = None
     try:
@@ -198,7 +240,7 @@ def _run_sim(args, cfg) -> int:
             rec.close()
     if stop is not None:
         return report_stop("track", stop, _stopped(args, rec))
-    return _report(args, sc, rec)
+    return _report(args, sc, rec, cfg, status)
 
 
 def _stopped(args, rec) -> str:
@@ -225,13 +267,16 @@ def _run_hardware(args, cfg) -> int:
     src_cfg = source_config(cfg.cameras)
     if src_cfg is None:
         raise InputError("config key 'cameras.kind' is \"none\": configure the stereo cameras")
-    status = _StatusLine()
-    rec = _recorder(args, cfg)
+    if "://" not in args.port and not Path(args.port).exists():
+        raise InputError(f"--port {args.port}: cannot open: no such device; `photoservo find-port` lists the serial ports")
+    status = _StatusLine(args.no_motion)
+    rec = None
     stop: KeyboardInterrupt | None = None
     try:
-        if rec is not None:
-            _setup_static(rec, cfg, rig, photo, model, args.seed, {})
-        with LatestFrameReader(make_source(src_cfg)) as reader:
+        with LatestFrameReader(make_source(src_cfg)) as reader:  # cameras first: a failed start leaves no recording
+            rec = _recorder(args, cfg)
+            if rec is not None:
+                _setup_static(rec, cfg, rig, photo, model, args.seed, {})
             sc = run_realtime(cfg, args.duration, port=args.port, cameras=ReaderCameras(reader), model=model,
                               rig=rig, collect=args.collect, no_motion=args.no_motion, recorder=rec,
                               status=status, seed=args.seed, rt_priority=args.rt_priority)
@@ -243,4 +288,4 @@ def _run_hardware(args, cfg) -> int:
             rec.close()
     if stop is not None:
         return report_stop("track", stop, _stopped(args, rec))
-    return _report(args, sc, rec)
+    return _report(args, sc, rec, cfg, status)

@@ -378,7 +378,9 @@ def _open_capture(device: int | str, what: str) -> cv2.VideoCapture:
     cap = cv2.VideoCapture(device)
     if not cap.isOpened():
         cap.release()
-        raise InputError(f"{what}: cannot open OpenCV device {device!r}")
+        from photoservo.vision.devices import available_summary
+
+        raise InputError(f"{what}: cannot open OpenCV device {device!r}; {available_summary()}")
     return cap
 
 
