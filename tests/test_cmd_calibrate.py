@@ -20,7 +20,8 @@ from calib_scene import (
 )
 
 from photoservo.cli.main import main
-from photoservo.cli.calibrate import pose_row, read_flange_poses, set_toml_key
+from photoservo.cli.calibrate.poses import pose_row, read_flange_poses
+from photoservo.cli.calibrate.water import set_toml_key
 from photoservo.vision.board import Board
 from photoservo.vision.calibrate import make_T, rotation_angle_deg
 from photoservo.vision.rig import Rig, load_rig, save_rig
