@@ -11,10 +11,10 @@ from pathlib import Path
 
 from photoservo.cli.calibrate.common import cameras_config
 from photoservo.cli.calibrate.poses import JOINT_COLUMNS, POSE_COLUMNS, pose_row
+from photoservo.cli.options import check_display, open_link
 from photoservo.config import load_config
 from photoservo.errors import InputError
 from photoservo.fileio import write_image_atomic, write_text_atomic
-from photoservo.robot.link import Link, LinkError
 from photoservo.vision.board import Board, detect_board, draw_detection
 from photoservo.vision.sources import make_source
 
@@ -59,24 +59,23 @@ def run_capture(args: argparse.Namespace) -> int:
     out = Path(args.out)
     config = load_config(args.config, args.overrides)
     source = make_source(cameras_config(args, config.cameras))
+    if args.spawn:
+        check_display("--spawn")
     link = None
     if args.port:
         from photoservo.robot.pa10 import fk
 
-        link = Link(args.port, config.link)
+        link = open_link(args.port, config.link)
     rows, poses = _existing_rows(out / "capture.csv"), _existing_rows(out / "poses.csv")
     first = 1 + max((int(r[0]) for r in rows if r[0].isdigit()), default=-1)  # continue a session
     saved = 0
     enter = None if args.interval > 0 else _EnterKey()
     if enter is not None:
         print("press Enter to save a pair, q + Enter to finish")
+    with source:  # opens, or fails here: a failed start leaves no recording
+        pass
     rec = Recorder.open(args.save, "calibrate", mode="lossless", view=args.spawn, connect_url=args.connect)
     try:
-        if link is not None:
-            try:
-                link.open()
-            except LinkError as e:
-                raise InputError(f"--port {args.port}: {e}") from None
         with source:
             for w in source.warnings:
                 print(f"photoservo calibrate: warning: {w}", file=sys.stderr)
@@ -106,8 +105,6 @@ def run_capture(args: argparse.Namespace) -> int:
                 if link is not None:
                     try:
                         q = link.state_at(frame.t).q
-                    except LinkError as e:
-                        raise InputError(f"--port {args.port}: {e}") from None
                     except LookupError as e:
                         print(f"  pair {frame.index}: no flange pose at its capture time ({e}), not saved")
                         continue
