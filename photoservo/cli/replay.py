@@ -9,6 +9,8 @@ complete recording (default logs/<UTC time>_replay.rrd) and prints the two runs 
 Servo gains change only the commands here (the arm is not moved); to see their effect on the
 run, re-run the same simulated world closed loop: `photoservo track --sim --world-from REC`.
 
+Progress is drawn on a terminal only; -q hides it and the header line.
+
 Examples:
     photoservo replay logs/20261122T052106Z_track.rrd --set ga.population=60
     photoservo replay run.rrd --set tracker.generations_per_frame=4 --out run_g4.rrd --view
@@ -17,11 +19,13 @@ Examples:
 from __future__ import annotations
 
 import argparse
-import json
-import math
-import sys
+import logging
 
 from photoservo.cli.options import add_config_options, check_display
+from photoservo.cli.output import print_json
+from photoservo.cli.output import progress as progress_bar
+
+log = logging.getLogger(__name__)
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -42,28 +46,16 @@ def run(args: argparse.Namespace) -> int:
         check_display("--view")
     setup = load_replay(args.recording, args.config, args.overrides, args.fixed_generations)
     n = len(setup.recording.frames)
-    quiet = args.json
-    if not quiet:
-        print(f"replaying {n} frames of {args.recording} (tracker seed {setup.seed}; "
-              f"{setup.generations_note})", file=sys.stderr)
-    step = max(1, n // 10)
-
-    def progress(k: int, total: int) -> None:
-        if not quiet and (k % step == 0 or k == total):
-            print(f"  frame {k}/{total}", file=sys.stderr, flush=True)
-
-    res = replay(setup, args.out, view=args.view, progress=progress)
+    log.info(f"replaying {n} frames of {args.recording} (tracker seed {setup.seed}; {setup.generations_note})")
+    with progress_bar(n, "replay", unit="frame") as bar:
+        res = replay(setup, args.out, view=args.view, progress=lambda k, total: bar.update(k - bar.n))
     if args.json:
-        rows = {r.key: {"recorded": _num(r.a), "replay": _num(r.b)} for r in res.comparison.rows}
-        print(json.dumps({"recording": str(setup.path), "replay": str(res.out_path),
-                          "frames": len(res.frames), "seconds": res.seconds, "fps": res.fps,
-                          "generations": setup.generations_note, "table": rows}))
+        rows = {r.key: {"recorded": r.a, "replay": r.b} for r in res.comparison.rows}
+        print_json({"recording": str(setup.path), "replay": str(res.out_path),
+                    "frames": len(res.frames), "seconds": res.seconds, "fps": res.fps,
+                    "generations": setup.generations_note, "table": rows})
     else:
         print(res.comparison)
         print(f"replayed {len(res.frames)} frames in {res.seconds:.1f} s ({res.fps:.2f} frames/s); "
               f"recording: {res.out_path}")
     return 0
-
-
-def _num(v: float) -> float | None:
-    return None if math.isnan(v) else v

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import logging
 import csv
 import sys
 import threading
@@ -17,6 +18,8 @@ from photoservo.errors import InputError
 from photoservo.fileio import write_image_atomic, write_text_atomic
 from photoservo.vision.board import Board, detect_board, draw_detection
 from photoservo.vision.sources import make_source
+
+log = logging.getLogger(__name__)
 
 
 class _EnterKey:
@@ -78,7 +81,7 @@ def run_capture(args: argparse.Namespace) -> int:
     try:
         with source:
             for w in source.warnings:
-                print(f"photoservo calibrate: warning: {w}", file=sys.stderr)
+                log.warning(w)
             t_next = time.monotonic()
             for frame in source:
                 dl = detect_board(frame.left, board) if board else None

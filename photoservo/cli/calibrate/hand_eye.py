@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import argparse
-import sys
+import logging
 from pathlib import Path
 
 import cv2
@@ -15,6 +15,8 @@ from photoservo.errors import InputError
 from photoservo.vision.board import detect_board
 from photoservo.vision.calibrate import MIN_HAND_EYE_VIEWS, MIN_ROTATION_DEG, board_pose, calibrate_hand_eye
 from photoservo.vision.rig import Rig, load_rig, save_rig
+
+log = logging.getLogger(__name__)
 
 
 def run_hand_eye(args: argparse.Namespace) -> int:
@@ -40,7 +42,7 @@ def run_hand_eye(args: argparse.Namespace) -> int:
     if res.max_rotation_deg < MIN_ROTATION_DEG and not args.force:
         raise InputError(f"{res.warnings[0]} (nothing written; --force writes it anyway)")
     for w in res.warnings:
-        print(f"photoservo calibrate: warning: {w}", file=sys.stderr)
+        log.warning(w)
     rv = np.degrees(cv2.Rodrigues(res.R)[0].ravel())
     print(f"hand-eye ({args.method}, {len(used)} views, rotation between poses up to {res.max_rotation_deg:.1f} deg):")
     print(f"  X_flange = R X_left + t:  t = [{res.t[0]:.2f}, {res.t[1]:.2f}, {res.t[2]:.2f}] mm, "

@@ -4,7 +4,7 @@ into a config file."""
 from __future__ import annotations
 
 import argparse
-import sys
+import logging
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -21,6 +21,8 @@ from photoservo.tomlconf import configs_dir, read_toml
 from photoservo.vision.board import BoardDetection, detect_board, detect_markers
 from photoservo.vision.calibrate import MIN_COMMON_CORNERS, board_points_left, fit_water_plane, marker_points_left
 from photoservo.vision.rig import Rig, load_rig
+
+log = logging.getLogger(__name__)
 
 
 def set_toml_key(text: str, dotted: str, value: float) -> str:
@@ -101,8 +103,8 @@ def run_water(args: argparse.Namespace) -> int:
           f"normal [{n[0]:.4f}, {n[1]:.4f}, {n[2]:.4f}], tilt {plane.tilt_deg:.2f} deg; "
           f"{plane.n_points} points, {plane.rms_mm:.2f} mm RMS off the plane")
     if plane.tilt_deg > 3.0 and len(points) > 1:
-        print(f"photoservo calibrate: warning: the plane is tilted {plane.tilt_deg:.1f} deg: waves, or a base "
-              "frame that is not level", file=sys.stderr)
+        log.warning(f"the plane is tilted {plane.tilt_deg:.1f} deg: waves, or a base "
+              "frame that is not level")
     print(f"water_z_mm = {plane.z_mm:.1f}")
     if args.update:
         p = Path(args.update)
