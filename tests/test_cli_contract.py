@@ -154,3 +154,34 @@ def test_json_outputs_are_strict(capsys):
     assert rc == 1
     js = strict(out)
     assert js["found"] is False and js["position_mm"] is None
+
+
+def _parsers():
+    import argparse
+
+    from photoservo.cli.main import build_parser
+
+    for verb in VERBS:
+        top = build_parser(verb)
+        sub = next(a for a in top._actions if isinstance(a, argparse._SubParsersAction)).choices[verb]
+        yield verb, sub
+        for a in sub._actions:
+            if isinstance(a, argparse._SubParsersAction):
+                for name, p in a.choices.items():
+                    yield f"{verb} {name}", p
+
+
+@pytest.mark.parametrize("verb, parser", list(_parsers()), ids=lambda x: x if isinstance(x, str) else "")
+def test_help_has_examples_and_every_flag_has_text(verb, parser):
+    text = (parser.description or "") + (parser.epilog or "")
+    if " " not in verb:  # a verb's --help shows its module docstring with examples
+        assert "Example" in text and "photoservo " + verb.split()[0] in text, verb
+    for a in parser._actions:
+        if a.option_strings and a.help is not argparse_suppress():
+            assert a.help and a.help.strip(), f"{verb}: {a.option_strings} has no help text"
+
+
+def argparse_suppress():
+    import argparse
+
+    return argparse.SUPPRESS

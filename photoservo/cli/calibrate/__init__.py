@@ -1,5 +1,6 @@
 """photoservo calibrate — the stereo rig, the hand-eye transform and the water plane.
 
+Examples (in the order of a calibration; `photoservo calibrate ACTION --help` for each):
     photoservo calibrate board   --board 9x6 --square-mm 25 [--charuco] --out board.png
     photoservo calibrate capture --devices 0 1 --out calib/ [--interval 2 | Enter] [--port /dev/ttyUSB0]
     photoservo calibrate stereo  --left calib/left --right calib/right --board 9x6 --square-mm 25 --out rig.toml
@@ -30,7 +31,7 @@ from photoservo.cli.calibrate.common import BOARD_HELP, board_options, source_op
 from photoservo.cli.calibrate.hand_eye import run_hand_eye
 from photoservo.cli.calibrate.stereo import run_stereo
 from photoservo.cli.calibrate.water import run_water
-from photoservo.cli.options import add_config_options
+from photoservo.cli.options import add_config_options, bounded
 from photoservo.vision.board import DEFAULT_DICTIONARY
 from photoservo.vision.calibrate import MIN_ROTATION_DEG
 
@@ -41,8 +42,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     b = sub.add_parser("board", help="write a printable board image",
                        description="Write a printable calibration board (PNG) at a given resolution.")
     board_options(b)
-    b.add_argument("--out", required=True, metavar="BOARD.png")
-    b.add_argument("--dpi", type=float, default=300.0, help="print resolution (default 300)")
+    b.add_argument("--out", required=True, metavar="BOARD.png", help="image file to write (.png)")
+    b.add_argument("--dpi", type=bounded(float, 10.0, 2400.0), default=300.0, help="print resolution (default 300)")
 
     s = sub.add_parser("stereo", help="calibrate both cameras and the stereo extrinsics",
                        description="Calibrate the stereo rig from image pairs of a board (paired by file "
@@ -59,7 +60,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                                    "camera from several flange poses -> the rig's [hand_eye]. Pose CSV "
                                    "columns: name,x_mm,y_mm,z_mm,rx_rad,ry_rad,rz_rad (T_base_flange, "
                                    "rotation vector) or name,q1_rad..q7_rad (PA-10 joints).")
-    h.add_argument("--rig", required=True, metavar="RIG.toml")
+    h.add_argument("--rig", required=True, metavar="RIG.toml", help="the stereo rig from `calibrate stereo`")
     h.add_argument("--views", required=True, metavar="DIR", help="left images (DIR or DIR/left)")
     h.add_argument("--poses", metavar="POSES.csv", help="flange poses (default DIR/poses.csv)")
     board_options(h)
@@ -75,15 +76,15 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                                    "floating on it, seen by the calibrated rig (with [hand_eye]) from known "
                                    "flange poses. One view of one board or of three markers is enough; "
                                    "markers spread out give the tilt too.")
-    w.add_argument("--rig", required=True, metavar="RIG.toml")
+    w.add_argument("--rig", required=True, metavar="RIG.toml", help="the rig, with [hand_eye] (`calibrate hand-eye`)")
     w.add_argument("--views", metavar="DIR", help="DIR/left (+ DIR/right) images, or DIR")
     w.add_argument("--poses", metavar="POSES.csv", help="flange poses (default DIR/poses.csv)")
-    w.add_argument("--markers", type=float, metavar="SIDE_MM",
+    w.add_argument("--markers", type=bounded(float, 0.0, 1000.0, lo_open=True, unit="mm"), metavar="SIDE_MM",
                    help="single ArUco markers of this side (mm, black square) from --dict instead of a board")
     w.add_argument("--live", action="store_true",
                    help="measure now: read pairs from the cameras ([cameras] or the source flags) and the "
                         "flange pose from the arm (--port) instead of --views")
-    w.add_argument("--frames", type=int, default=5, metavar="N",
+    w.add_argument("--frames", type=bounded(int, 1, 1000), default=5, metavar="N",
                    help="--live: pairs with the board found to use (default 5; gives up after 30 s)")
     w.add_argument("--port", help="--live: serial port of the arm's bridge")
     source_options(w)
@@ -100,13 +101,15 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                                    "pair's capture time goes to OUT/poses.csv.")
     source_options(c)
     c.add_argument("--out", required=True, metavar="DIR", help="writes DIR/left, DIR/right, DIR/capture.csv")
-    c.add_argument("--interval", type=float, default=0.0, metavar="S", help="save every S seconds (0: on Enter)")
-    c.add_argument("--count", type=int, default=0, metavar="N", help="stop after N pairs (0: until q / end)")
+    c.add_argument("--interval", type=bounded(float, 0.0, 3600.0, unit="s"), default=0.0, metavar="S", help="save every S seconds (0: on Enter)")
+    c.add_argument("--count", type=bounded(int, 0, 100000), default=0, metavar="N", help="stop after N pairs (0: until q / end)")
     c.add_argument("--board", metavar="COLSxROWS", help="draw the found corners in the preview; " + BOARD_HELP)
-    c.add_argument("--square-mm", type=float, default=25.0)
-    c.add_argument("--charuco", action="store_true")
-    c.add_argument("--marker-mm", type=float, default=0.0)
-    c.add_argument("--dict", default=DEFAULT_DICTIONARY)
+    c.add_argument("--square-mm", type=bounded(float, 0.0, 1000.0, lo_open=True, unit="mm"), default=25.0,
+                   help="square side (mm), for the preview's board (default 25)")
+    c.add_argument("--charuco", action="store_true", help="the preview's board is a ChArUco board")
+    c.add_argument("--marker-mm", type=bounded(float, 0.0, 1000.0, unit="mm"), default=0.0,
+                   help="ChArUco marker side (mm); default 0.7 x square")
+    c.add_argument("--dict", default=DEFAULT_DICTIONARY, help=f"ChArUco dictionary (default {DEFAULT_DICTIONARY})")
     c.add_argument("--require-board", action="store_true", help="save only pairs with the board in both images")
     c.add_argument("--port", help="serial port of the arm's bridge: log the flange pose of each pair")
     add_config_options(c)

@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import dataclasses
 
+from photoservo.cli.options import bounded
 from photoservo.errors import InputError
 from photoservo.vision.board import Board, DEFAULT_DICTIONARY
 from photoservo.vision.sources import CamerasParams, SourceConfig, source_config
@@ -18,9 +19,9 @@ BOARD_HELP = "board size as COLSxROWS INNER corners (where four squares meet): 1
 
 def board_options(p: argparse.ArgumentParser, required: bool = True) -> None:
     p.add_argument("--board", required=required, metavar="COLSxROWS", help=BOARD_HELP)
-    p.add_argument("--square-mm", type=float, required=required, metavar="S", help="square side (mm), as printed")
+    p.add_argument("--square-mm", type=bounded(float, 0.0, 1000.0, lo_open=True, unit="mm"), required=required, metavar="S", help="square side (mm), as printed")
     p.add_argument("--charuco", action="store_true", help="a ChArUco board (markers in the white squares)")
-    p.add_argument("--marker-mm", type=float, default=0.0, metavar="M",
+    p.add_argument("--marker-mm", type=bounded(float, 0.0, 1000.0, unit="mm"), default=0.0, metavar="M",
                    help="ChArUco marker side (mm); default 0.7 x square")
     p.add_argument("--dict", default=DEFAULT_DICTIONARY, metavar="NAME",
                    help=f"ChArUco ArUco dictionary (default {DEFAULT_DICTIONARY}; also finds DICT_4X4_50/100 boards)")
@@ -33,13 +34,15 @@ def source_options(p: argparse.ArgumentParser) -> None:
     src.add_argument("--side-by-side", metavar="DEVICE", help="one device with left|right halves")
     src.add_argument("--videos", nargs=2, metavar=("LEFT", "RIGHT"), help="two video files")
     src.add_argument("--folders", nargs=2, metavar=("LEFT", "RIGHT"), help="two image folders")
-    p.add_argument("--width", type=int, help="capture width (px per camera; 0 = device default)")
-    p.add_argument("--height", type=int)
-    p.add_argument("--fps", type=float)
-    p.add_argument("--fourcc", help="e.g. MJPG")
-    p.add_argument("--exposure", type=float, help="lock exposure (device units; 0 = automatic)")
-    p.add_argument("--white-balance-k", type=float, help="lock white balance (K; 0 = automatic)")
-    p.add_argument("--max-skew-ms", type=float, help="drop pairs whose left/right times differ more")
+    p.add_argument("--width", type=bounded(int, 0, 16384), help="capture width (px per camera; 0 = device default)")
+    p.add_argument("--height", type=bounded(int, 0, 16384), help="capture height (px; 0 = device default)")
+    p.add_argument("--fps", type=bounded(float, 0.0, 1000.0), help="requested frame rate (0 = device default)")
+    p.add_argument("--fourcc", help="pixel format, e.g. MJPG (default: the device's)")
+    p.add_argument("--exposure", type=bounded(float, 0.0, 1e6), help="lock exposure (device units; 0 = automatic)")
+    p.add_argument("--white-balance-k", type=bounded(float, 0.0, 15000.0),
+                   help="lock white balance (K; 0 = automatic)")
+    p.add_argument("--max-skew-ms", type=bounded(float, 0.0, 10000.0),
+                   help="drop pairs whose left/right capture times differ more (ms)")
 
 
 def cameras_config(args: argparse.Namespace, cams: CamerasParams) -> SourceConfig:
