@@ -21,18 +21,10 @@ from photoservo.robot import protocol as P
 from photoservo.robot.pa10 import HOME_Q
 from photoservo.sim.emulator import Emulator, EmulatorParams
 from photoservo.tomlconf import build_dataclass, configs_dir, read_toml
+from test_move_cli import _wait  # tests/ is on sys.path (pytest's rootdir-relative import)
 
 PY = sys.executable
 EMU = build_dataclass(EmulatorParams, read_toml(configs_dir() / "default.toml")["emulator"], "emulator")
-
-
-def _wait(pred, timeout: float) -> bool:
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        if pred():
-            return True
-        time.sleep(0.01)
-    return False
 
 
 @pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGHUP])
