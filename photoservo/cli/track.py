@@ -41,6 +41,8 @@ from photoservo.cli.signals import report_stop
 from photoservo.config import load_config
 from photoservo.tomlconf import dump_config
 
+log = logging.getLogger(__name__)
+
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--sim", action="store_true", help="run on the built-in simulator (default without hardware)")
@@ -125,9 +127,7 @@ def run(args: argparse.Namespace) -> int:
     if args.view:
         check_display("--view")
     if args.world_from:
-        from photoservo.record.replay import track_world_from
-
-        return track_world_from(args, _run_sim)
+        return _run_world_from(args)
     args.duration = 20.0 if args.duration is None else args.duration
     args.seed = 0 if args.seed is None else args.seed
     cfg = load_config(args.config, args.overrides)
@@ -141,6 +141,41 @@ def run(args: argparse.Namespace) -> int:
     if hardware:
         return _run_hardware(args, cfg)
     return _run_sim(args, cfg)
+
+
+def _run_world_from(args: argparse.Namespace) -> int:
+    """`track --sim --world-from REC`: the recorded world (its [sim], seeds and length) with the new
+    config, closed loop, then the comparison table against the recorded run. The run is recorded
+    as usual (to a temporary file with --no-record, for the table)."""
+    import tempfile
+
+    from photoservo.record.recorder import default_path
+    from photoservo.record.replay import compare_runs, world_from
+
+    if args.port or args.cameras:
+        raise InputError("--world-from runs the simulator: it cannot be combined with --port or --cameras")
+    w = world_from(args.world_from, args.config, args.overrides, args.seed)
+    if w.cfg.cameras.kind != "none":
+        raise InputError("--world-from runs the simulator: config key 'cameras.kind' must be \"none\"")
+    if args.duration is None:
+        args.duration = w.duration_s
+    args.seed = w.seed
+    log.info(f"world from {w.path}: [sim] seed {w.cfg.sim.seed}, tracker seed {w.seed}, {args.duration:.2f} s"
+             + (f"; [sim] changed by you: {', '.join(w.changed_sim_keys)}" if w.changed_sim_keys else ""))
+    tmp = None
+    if args.no_record:
+        tmp = tempfile.TemporaryDirectory(prefix="photoservo-world-from-")
+        args.no_record, args.record = False, str(Path(tmp.name) / "run.rrd")
+        args.temporary_record = True  # for the table only: deleted afterwards, so not reported
+    elif args.record is None:
+        args.record = str(default_path("track", w.cfg.recording.dir))
+    try:
+        code = _run_sim(args, w.cfg)
+        print(compare_runs(w.recording, args.record, "recorded", "this run"), file=sys.stderr if args.json else sys.stdout)
+    finally:
+        if tmp is not None:
+            tmp.cleanup()
+    return code
 
 
 def _recorder(args, cfg):
@@ -174,6 +209,8 @@ def _collection(s: dict, cfg, status: _StatusLine) -> str:
 
 def _report(args, sc, rec, cfg, status) -> int:
     s = sc.summary()
+    if getattr(args, "temporary_record", False):
+        rec = None
     if rec is not None:
         s["recording"] = _recording_files(rec)
     if args.json:

@@ -36,7 +36,6 @@ from __future__ import annotations
 
 import dataclasses
 import math
-import sys
 import time
 import tomllib
 import warnings
@@ -369,40 +368,3 @@ def world_from(path: str | Path, config_path: str | Path | None = None, override
 
 def print_comparison(comparison: Comparison, file: Any = None) -> None:
     print(str(comparison), file=file or sys.stdout)
-
-
-def track_world_from(args: Any, run_sim: Callable[[Any, Config], int]) -> int:
-    """`photoservo track --sim --world-from REC` (cli/track.py calls this with its `_run_sim`):
-    the recorded world with the new config, closed loop, then the comparison table. The run is
-    recorded as usual (to a temporary file with --no-record, for the table)."""
-    import tempfile
-
-    from photoservo.record.recorder import default_path
-
-    if args.port:
-        raise InputError("--world-from runs the simulator: it cannot be combined with --port")
-    w = world_from(args.world_from, args.config, args.overrides, args.seed)
-    if w.cfg.cameras.kind != "none":
-        raise InputError("--world-from runs the simulator: config key 'cameras.kind' must be \"none\"")
-    if args.duration is None:
-        args.duration = w.duration_s
-    if args.duration <= 0:
-        raise InputError(f"--duration {args.duration}: must be > 0 s")
-    args.seed = w.seed
-    out = sys.stderr if args.json else sys.stdout
-    print(f"world from {w.path}: [sim] seed {w.cfg.sim.seed}, tracker seed {w.seed}, {args.duration:.2f} s"
-          + (f"; [sim] changed by you: {', '.join(w.changed_sim_keys)}" if w.changed_sim_keys else ""),
-          file=sys.stderr)
-    tmp = None
-    if args.no_record:
-        tmp = tempfile.TemporaryDirectory(prefix="photoservo-world-from-")
-        args.no_record, args.record = False, str(Path(tmp.name) / "run.rrd")
-    elif args.record is None:
-        args.record = str(default_path("track", w.cfg.recording.dir))
-    try:
-        code = run_sim(args, w.cfg)
-        print(compare_runs(w.recording, args.record, "recorded", "this run"), file=out)
-    finally:
-        if tmp is not None:
-            tmp.cleanup()
-    return code
