@@ -62,6 +62,8 @@ BAD: dict[str, list[tuple[list[str], str]]] = {
              (["--port", NOPE, "--joints", "0", "95", "0", "60", "0", "90", "0"], "S2")],
     "pa10-sim": [(["--drop", "1.5"], "--drop"), (["--baud", "-1"], "--baud"),
                  (["--seed", "x"], "--seed"), (["--set", "emulator.state_hz=500"], "state_hz")],
+    "tune": [(["--space", "servo.k_position=x"], "--space"), (["--space", "nosuch.key=0:1"], "nosuch"),
+             ([], "no search space")],
     "config": [(["show", "--set", "nosuch.key=1"], "nosuch"), (["show", "--set", "ga.population"], "ga.population"),
                (["list"], "list")],
 }

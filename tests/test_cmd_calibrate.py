@@ -95,7 +95,7 @@ def test_stereo_too_few_pairs_is_one_line(stereo_dirs, tmp_path, capsys):
     [
         (["--left", "/nonexistent/L", "--right", "/nonexistent/R", *BOARD_ARGS], "--left /nonexistent/L: folder not found"),
         (["--board", "9by6", "--square-mm", "25"], "--board '9by6': expected COLSxROWS"),
-        (["--board", "9x6", "--square-mm", "-2"], "square size must be within 0..1000 mm"),
+        (["--board", "9x6", "--square-mm", "-2"], "--square-mm: -2 must be > 0"),
         (["--board", "1x6", "--square-mm", "25"], "2..100 inner corners per side"),
     ],
 )

@@ -41,8 +41,8 @@ def test_space_from_the_command_line_and_toml(tmp_path: Path):
 
 @pytest.mark.parametrize("spec, says", [
     ("servo.k_positio=1:2", "unknown config key 'servo.k_positio'"),
-    ("servo.k_position=-1:2", "'servo.k_position' must be > 0"),          # the config's own bound
-    ("servo.feed_forward=0:1.5", "'servo.feed_forward' must be in 0..1"),
+    ("servo.k_position=-1:2", "'servo.k_position' = -1: must be within 0..100"),  # the config's own bound
+    ("servo.feed_forward=0:1.5", "'servo.feed_forward' = 1.5: must be within 0..1"),
     ("servo.k_position=3:2", "range 3:2 is empty"),
     ("servo.k_position=0:2:log", "log scale needs low > 0"),
     ("tracker.generations_per_frame=4.5:12", "integer key"),

@@ -102,7 +102,7 @@ def session_scores(summary: dict) -> dict[str, float]:
     frames = summary["frames"]
     t = summary.get("timings_ms_mean") or summary.get("timings_ms_median") or {}
     hold = summary.get("hold_error_rms_mm", summary.get("rms_position_error_mm"))   # issue 11 renames it
-    return {"hold": float(hold),
+    return {"hold": float("nan") if hold is None else float(hold),   # strict JSON: null when there is none
             "lost": (frames - round(summary["found_ratio"] * frames)) / frames if frames else float("nan"),
             "cpu": float(t.get("hue", float("nan")) + t.get("ga", float("nan")))}
 
