@@ -268,7 +268,7 @@ def _run_sim(args, cfg) -> int:
             finally:
                 emu.stop()
                 if rec is not None:  # what the emulated bridge saw: the stop and servo off, in order
-                    rec.event(rec.last_t, f"emulated bridge: {emu.model.describe_end()}")
+                    rec.event(rec.last_t, f"emulated bridge: {emu.summary.get('end', 'no report')}")
     except KeyboardInterrupt as e:  # Ctrl-C, SIGTERM, SIGHUP: the session stopped the arm in order
         stop = e
     finally:

@@ -13,6 +13,7 @@ running the missed periods back to back.
 from __future__ import annotations
 
 import os
+import signal
 import time
 
 
@@ -67,3 +68,27 @@ def raise_priority(priority: int, nice: int = -10) -> str:
         return f"nice {nice}"
     except (OSError, AttributeError):
         return "normal"
+
+
+#: Ctrl-C, SIGTERM, SIGHUP: a terminal, `timeout` or systemd may send them to a whole process group
+STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
+
+
+def ignore_stop_signals() -> None:
+    """In a child process of a session (control loop, renderer, bridge emulator): ignore the stop
+    signals; the session process gets them too and stops its children in order (the arm with a
+    controlled stop and the servo off first). The parent blocks them while starting the child
+    (`start_child`), so none lands before this call."""
+    for s in STOP_SIGNALS:
+        signal.signal(s, signal.SIG_IGN)
+    signal.pthread_sigmask(signal.SIG_UNBLOCK, STOP_SIGNALS)
+
+
+def start_child(proc) -> None:
+    """`proc.start()` (a multiprocessing Process) with the stop signals blocked: the mask is
+    inherited through fork and exec, until the child ignores them itself (`ignore_stop_signals`)."""
+    old = signal.pthread_sigmask(signal.SIG_BLOCK, STOP_SIGNALS)
+    try:
+        proc.start()
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, old)

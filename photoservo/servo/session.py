@@ -21,7 +21,6 @@ from __future__ import annotations
 import dataclasses
 import math
 import multiprocessing
-import signal
 import threading
 import time
 from collections import deque
@@ -33,7 +32,7 @@ import numpy as np
 from photoservo.robot import pa10
 from photoservo.geometry import make_pose, pose_error
 from photoservo.robot import protocol as P
-from photoservo.robot.clock import Rate, raise_priority, set_realtime
+from photoservo.robot.clock import Rate, ignore_stop_signals, raise_priority, set_realtime, start_child
 from photoservo.config import Config
 from photoservo.servo.control import (
     ServoParams,
@@ -400,7 +399,7 @@ def _render_process(cfg: Config, requests, frames) -> None:
     """The simulated cameras' renderer in its own process (its own core): builds the same scene
     as the session (`build_sim`, deterministic from the config) and renders each request
     (t_left, t_right, T_base_left, T_base_left_at_right) into a stereo pair."""
-    _ignore_stop_signals()  # the session stops it
+    ignore_stop_signals()  # the session stops it
     scene = build_sim(cfg).scene
     frames.send(("ready",))
     while True:
@@ -412,28 +411,6 @@ def _render_process(cfg: Config, requests, frames) -> None:
             return
         frames.send(scene.render(*msg))
 
-
-STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
-
-
-def _ignore_stop_signals() -> None:
-    """In a child process: ignore Ctrl-C, SIGTERM and SIGHUP, which a terminal, `timeout` or
-    systemd send to the whole process group; the session process gets them too and stops its
-    children in order (the control process with a controlled stop and the servo off). The
-    parent blocks them while starting the child (`_start_child`), so none lands before this."""
-    for s in STOP_SIGNALS:
-        signal.signal(s, signal.SIG_IGN)
-    signal.pthread_sigmask(signal.SIG_UNBLOCK, STOP_SIGNALS)
-
-
-def _start_child(proc) -> None:
-    """Start a spawned child process with the stop signals blocked (the mask is inherited
-    through fork and exec), until the child ignores them itself (`_ignore_stop_signals`)."""
-    old = signal.pthread_sigmask(signal.SIG_BLOCK, STOP_SIGNALS)
-    try:
-        proc.start()
-    finally:
-        signal.pthread_sigmask(signal.SIG_SETMASK, old)
 
 
 class SimCameras:
@@ -451,7 +428,7 @@ class SimCameras:
         self._frm_rx, self._frm_tx = ctx.Pipe(duplex=False)
         self._proc = ctx.Process(target=_render_process, args=(cfg, self._req_rx, self._frm_tx),
                                  name="photoservo-cameras", daemon=True)
-        _start_child(self._proc)
+        start_child(self._proc)
         if not self._frm_rx.poll(60.0):
             raise RuntimeError("the simulated cameras' renderer did not start within 60 s")
         self._frm_rx.recv()
@@ -502,7 +479,7 @@ class SimCameras:
         except (OSError, ValueError):
             pass
         self._proc.join(timeout=5.0)
-        if self._proc.is_alive():  # it ignores SIGTERM (_ignore_stop_signals)
+        if self._proc.is_alive():  # it ignores SIGTERM (ignore_stop_signals)
             self._proc.kill()
 
 
@@ -583,7 +560,7 @@ def control_process(job: ControlJob, conn, stop) -> None:
 
     # Ctrl-C (and SIGTERM, SIGHUP) may reach the whole process group: the vision process handles
     # it and sets `stop`, so this loop ends in order (controlled stop, servo off)
-    _ignore_stop_signals()
+    ignore_stop_signals()
     cfg = job.cfg
     sc = Scores()
     ctrl = Controller(cfg.servo, Motion(cfg.motion, pa10.load_limits()), job.T_flange_left, job.centre,
@@ -662,7 +639,7 @@ def run_realtime(cfg: Config, duration_s: float, *, port: str, cameras, model, r
                      None if scene is None else scene.motion, None if scene is None else scene.size_mm(),
                      t0, settle_s, rt_priority, simulated)
     proc = ctx.Process(target=control_process, args=(job, child, child_stop), name="photoservo-control", daemon=True)
-    _start_child(proc)
+    start_child(proc)
     history = StateHistory()
     latest: dict = {}
     result: dict = {}
@@ -737,7 +714,7 @@ def run_realtime(cfg: Config, duration_s: float, *, port: str, cameras, model, r
         child_stop.set()
         rx.join(timeout=10.0)
         proc.join(timeout=5.0)
-        if proc.is_alive():  # it ignores SIGTERM (_ignore_stop_signals)
+        if proc.is_alive():  # it ignores SIGTERM (ignore_stop_signals)
             proc.kill()
         ctl = result.get("scores")
         if ctl is None:

@@ -22,6 +22,7 @@ from typing import Self
 import numpy as np
 
 from photoservo.robot import protocol as P
+from photoservo.robot.clock import start_child
 from photoservo.robot.pa10 import N_JOINTS, PA10Limits
 from photoservo.sim.emulator import Emulator, EmulatorParams, TrueState
 
@@ -42,10 +43,9 @@ def _publish(shared, t: float, q: np.ndarray, dq: np.ndarray, status: int, fault
 
 
 def _emulator_main(params: EmulatorParams, limits: PA10Limits, q0, shared, conn, stop) -> None:
-    import signal
+    from photoservo.robot.clock import ignore_stop_signals, raise_priority
 
-    signal.signal(signal.SIGINT, signal.SIG_IGN)  # the session stops it, after the arm
-    from photoservo.robot.clock import raise_priority
+    ignore_stop_signals()  # the session stops it, after the arm
 
     sched = raise_priority(EMULATOR_RT_PRIORITY, nice=-15)
     emu = Emulator(params, limits, q0=q0)
@@ -63,7 +63,7 @@ def _emulator_main(params: EmulatorParams, limits: PA10Limits, q0, shared, conn,
         m = emu.model
         conn.send(("done", repr(emu.error) if emu.error else "", {
             "accepted": m.accepted, "refused": m.refused, "watchdog_stops": m.watchdog_stops,
-            "tick_overruns": emu.tick_overruns, "states_skipped": emu.states_skipped}))
+            "tick_overruns": emu.tick_overruns, "states_skipped": emu.states_skipped, "end": m.describe_end()}))
 
 
 class EmulatorProcess:
@@ -84,9 +84,9 @@ class EmulatorProcess:
 
     def start(self, timeout_s: float = 60.0) -> str:
         """Start the process; return the pty path once the bridge runs."""
-        self._proc.start()
+        start_child(self._proc)
         if not self._conn.poll(timeout_s):
-            self._proc.terminate()
+            self._proc.kill()
             raise RuntimeError(f"the simulator's bridge (emulator process) did not start within {timeout_s:g} s")
         _, self.path, self.scheduling = self._conn.recv()
         return self.path
@@ -99,8 +99,8 @@ class EmulatorProcess:
             if msg[0] == "done":
                 _, self.error, self.summary = msg
         self._proc.join(timeout=5.0)
-        if self._proc.is_alive():
-            self._proc.terminate()
+        if self._proc.is_alive():  # it ignores SIGTERM (ignore_stop_signals)
+            self._proc.kill()
 
     def __enter__(self) -> Self:
         self.start()
