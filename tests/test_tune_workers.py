@@ -12,6 +12,7 @@ import socket
 import subprocess
 import sys
 import tempfile
+import threading
 import time
 from collections.abc import Iterator
 from pathlib import Path
@@ -109,13 +110,16 @@ def test_sigterm_stops_after_the_running_trial_and_the_study_resumes(tmp_path: P
     url = f"sqlite:///{db}"
     argv = [*TINY, "--worlds", "1", "--trials", "3", "--storage", db, "--study", "s"]
     p = _tune(*argv)
+    lines: list[str] = []
+    reader = threading.Thread(target=lambda: lines.extend(p.stderr), daemon=True)   # the child's stderr
+    reader.start()
     deadline = time.monotonic() + 300
-    while time.monotonic() < deadline and p.poll() is None:
-        if os.path.exists(db) and any(t.state.name == "COMPLETE" for t in _trials(url, "s")):
-            break
-        time.sleep(0.3)
+    while time.monotonic() < deadline and p.poll() is None and not any(x.startswith("trial 1/3") for x in lines):
+        time.sleep(0.2)   # the first trial is stored (the progress line follows the storage's tell)
     p.send_signal(signal.SIGTERM)
-    _, err = p.communicate(timeout=300)
+    p.wait(timeout=300)
+    reader.join(timeout=10)
+    err = "".join(lines)
     assert p.returncode == 128 + signal.SIGTERM, err[-2000:]
     assert "stopped by SIGTERM after the running trials" in err
     kept = _trials(url, "s")

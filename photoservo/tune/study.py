@@ -85,20 +85,33 @@ def open_storage(url: str) -> Any:
     """Optuna's RDB storage on `url` (heartbeat: a worker that dies mid-trial has its trial
     failed and re-run by the others). A URL it cannot use is an InputError."""
     import optuna
-    from sqlalchemy.exc import ArgumentError, OperationalError
+    from sqlalchemy.exc import ArgumentError, DBAPIError
 
     kwargs: dict[str, Any] = {}
     if url.startswith("sqlite"):
         kwargs["connect_args"] = {"timeout": 60}   # several local workers write to one file
     else:
         kwargs["pool_pre_ping"] = True
-    try:
-        return optuna.storages.RDBStorage(
-            url, engine_kwargs=kwargs, heartbeat_interval=10, grace_period=60,
-            heartbeat_stale_trial_callback=optuna.storages.RetryHeartbeatStaleTrialCallback(max_retry=2))
-    except (ArgumentError, OperationalError, ImportError, ModuleNotFoundError, ValueError) as e:
-        first = str(e).strip().splitlines()[0] if str(e).strip() else type(e).__name__
-        raise InputError(f"--storage {_redact(url)}: cannot open ({first})") from None
+    for attempt in range(3):
+        try:
+            return optuna.storages.RDBStorage(
+                url, engine_kwargs=kwargs, heartbeat_interval=10, grace_period=60,
+                heartbeat_stale_trial_callback=optuna.storages.RetryHeartbeatStaleTrialCallback(max_retry=2))
+        except DBAPIError as e:
+            # two workers starting together race to create the schema ("table ... already
+            # exists"): the second one's retry finds it made
+            if attempt < 2 and "already exists" in str(e):
+                time.sleep(0.5 + attempt)
+                continue
+            raise InputError(f"--storage {_redact(url)}: cannot open ({_first_line(e)})") from None
+        except (ArgumentError, ImportError, ModuleNotFoundError, ValueError) as e:
+            raise InputError(f"--storage {_redact(url)}: cannot open ({_first_line(e)})") from None
+    raise AssertionError("unreachable")
+
+
+def _first_line(e: BaseException) -> str:
+    text = str(e).strip()
+    return text.splitlines()[0] if text else type(e).__name__
 
 
 def _redact(url: str) -> str:
