@@ -187,3 +187,62 @@ def argparse_suppress():
     import argparse
 
     return argparse.SUPPRESS
+
+
+def test_a_rig_with_the_baseline_sign_swapped_gets_a_hint(tmp_path, caplog):
+    """T x > 0 (the right camera LEFT of the left one) is nearly always a swapped sign: the
+    search would then find nothing, so the loader says so, naming the file and T."""
+    import argparse
+    import logging
+
+    from photoservo.cli.options import load_stereo_inputs
+    from photoservo.config import load_config
+    from photoservo.vision.rig import Rig, load_rig, save_rig
+
+    rig = load_rig(S / "rig.toml")
+    assert rig.T[0] < 0
+    swapped = tmp_path / "swapped.toml"
+    save_rig(Rig(rig.left, rig.right, rig.R, -rig.T, rig.hand_eye), swapped)
+    args = argparse.Namespace(rig=str(swapped), photo=str(S / "photo.png"), roi=None, left=str(S / "left.png"),
+                              right=str(S / "right.png"))
+    with caplog.at_level(logging.WARNING):
+        load_stereo_inputs(args, load_config())
+    assert any("swapped.toml" in r.message and "T x = +" in r.message and "sign" in r.message
+               for r in caplog.records), caplog.text
+    caplog.clear()
+    with caplog.at_level(logging.WARNING):
+        load_stereo_inputs(argparse.Namespace(**{**vars(args), "rig": str(S / "rig.toml")}), load_config())
+    assert not caplog.records
+
+
+def test_progress_is_drawn_on_a_terminal_and_silent_in_a_log(tmp_path):
+    """scan's progress bar on a real pty (tqdm's \\r updates, 100 %), and nothing of it when
+    stderr is a file: the issue's `2>log; grep -c $'\\r' log` gives 0."""
+    import os
+    import pty
+
+    argv = [sys.executable, "-m", "photoservo.cli", "scan", *STEREO, "--pose", str(S / "truth.json"),
+            "--axes", "z", "--steps", "5"]
+    import fcntl
+    import struct
+    import termios
+
+    master, slave = pty.openpty()
+    fcntl.ioctl(slave, termios.TIOCSWINSZ, struct.pack("HHHH", 24, 100, 0, 0))  # a terminal's size
+    r = subprocess.run(argv + ["--out", str(tmp_path / "a")], stderr=slave, stdout=subprocess.DEVNULL, timeout=300)
+    os.close(slave)
+    seen = b""
+    while True:
+        try:
+            chunk = os.read(master, 4096)
+        except OSError:
+            break
+        if not chunk:
+            break
+        seen += chunk
+    os.close(master)
+    assert r.returncode == 0 and b"\r" in seen and b"100%" in seen, seen[-300:]
+    with open(tmp_path / "log", "w") as log:
+        r = subprocess.run(argv + ["--out", str(tmp_path / "b")], stderr=log, stdout=subprocess.DEVNULL, timeout=300)
+    text = (tmp_path / "log").read_text()
+    assert r.returncode == 0 and text.count("\r") == 0 and "%" not in text, text
