@@ -121,7 +121,7 @@ def test_sigterm_stops_after_the_running_trial_and_the_study_resumes(tmp_path: P
     reader.join(timeout=10)
     err = "".join(lines)
     assert p.returncode == 128 + signal.SIGTERM, err[-2000:]
-    assert "stopped by SIGTERM after the running trials" in err
+    assert "photoservo tune: interrupted by SIGTERM: stopped after the running trials" in err
     kept = _trials(url, "s")
     assert {t.state.name for t in kept} == {"COMPLETE"} and 1 <= len(kept) < 3   # none left running
     again = _tune(*argv)

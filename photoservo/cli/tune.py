@@ -31,13 +31,15 @@ Examples:
 from __future__ import annotations
 
 import argparse
+import logging
 import math
-import sys
 import time
 from typing import Any
 
 from photoservo.cli.config import add_config_options
 from photoservo.errors import InputError
+
+log = logging.getLogger(__name__)
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -150,8 +152,8 @@ class _Progress:
             self.p.seconds.append(r.seconds)
             v = r.values[0]
             self.best = v if self.best is None else min(self.best, v)
-        print(progress_line(self.done, self.spec.trials, r.number, r.scores, failed, self.best,
-                            self.p.eta_s(self.done)), file=sys.stderr, flush=True)
+        log.info(progress_line(self.done, self.spec.trials, r.number, r.scores, failed, self.best,
+                               self.p.eta_s(self.done)))
 
 
 def run(args: argparse.Namespace) -> int:
@@ -167,11 +169,11 @@ def run(args: argparse.Namespace) -> int:
     spec = StudySpec(args.study, storage_url(args.storage), tuple(space), names, weights, args.trials, args.seed,
                      runs=tuned.describe() + " | " + " ".join(args.overrides))
     study = open_study(spec, _start_params(args, space))
-    print(f"study '{spec.name}' in {_redact(spec.storage)}: {len(completed(study))}/{spec.trials} trials done\n"
-          f"space: {'; '.join(p.describe() for p in space)}\n"
-          f"objective{'s (Pareto front)' if spec.pareto else ''}: "
-          + (" + ".join(f"{w:g} x {n}" for n, w in zip(names, weights)) if weights else ", ".join(names))
-          + f"\ntuned on: {tuned.describe()}", file=sys.stderr)
+    log.info(f"study '{spec.name}' in {_redact(spec.storage)}: {len(completed(study))}/{spec.trials} trials done\n"
+             f"space: {'; '.join(p.describe() for p in space)}\n"
+             f"objective{'s (Pareto front)' if spec.pareto else ''}: "
+             + (" + ".join(f"{w:g} x {n}" for n, w in zip(names, weights)) if weights else ", ".join(names))
+             + f"\ntuned on: {tuned.describe()}")
     t0 = time.monotonic()
     with stop_after_trial() as flag:
         run_jobs(Job(spec, tuned), args.jobs, flag, _Progress(spec, study, args.jobs))
@@ -183,20 +185,19 @@ def _finish(args: argparse.Namespace, spec: Any, study: Any, held: Any, signum: 
     from photoservo.tune.study import best_trials, completed
 
     done = completed(study)
-    print(f"{len(done)}/{spec.trials} trials complete ({seconds:.0f} s this run)", file=sys.stderr)
+    log.info(f"{len(done)}/{spec.trials} trials complete ({seconds:.0f} s this run)")
     if done:
         print(("Pareto front" if spec.pareto else "best trials") + ":\n" + best_table(best_trials(study, spec), spec))
     if signum:
-        import signal
+        from photoservo.cli.signals import StopSignal, report_stop
 
-        print(f"photoservo tune: stopped by {signal.Signals(signum).name} after the running trials; "
-              f"the study keeps them (run again to continue)", file=sys.stderr)
-        return 128 + signum
+        return report_stop("tune", StopSignal(signum),
+                           "stopped after the running trials; the study keeps them (run again to continue)")
     if not done:
         raise InputError(f"--study {spec.name}: every trial failed (see the lines above)")
     if args.plot:
         files = write_plots(study, spec, args.plot)
-        print("plots: " + ", ".join(str(f) for f in files), file=sys.stderr)
+        log.info("plots: " + ", ".join(str(f) for f in files))
     if args.out:
         _write_best(args, spec, study, held)
     return 0
@@ -215,18 +216,17 @@ def _write_best(args: argparse.Namespace, spec: Any, study: Any, held: Any) -> N
     header = [f"# photoservo tune: study '{spec.name}', best trial #{best.number} of {len(study.trials)}",
               f"# objectives: {', '.join(spec.objectives)}; space: {'; '.join(p.describe() for p in spec.space)}"]
     if held is None:
-        print("held-out: none (give --holdout-recordings, or 2+ --recordings)", file=sys.stderr)
+        log.warning("held-out: none (give --holdout-recordings, or 2+ --recordings)")
     else:
-        print(f"re-measuring the start and trial #{best.number} on held-out runs ...", file=sys.stderr)
+        log.info(f"re-measuring the start and trial #{best.number} on held-out runs ...")
         a = measure(held, {})
         b = a if best.user_attrs.get("start") else measure(held, params)   # the start won: the same runs
         table = heldout_table(a, b, held.describe(), spec.objectives[0])
         print(table)
         worse = [n for n in spec.objectives if b.scores.get(n, math.nan) > a.scores.get(n, math.nan)]
         if worse:
-            print(f"warning: on the held-out runs the tuned configuration is worse than the start in "
-                  f"{', '.join(worse)}: it may fit the tuned runs only (tune on more or longer runs)",
-                  file=sys.stderr)
+            log.warning(f"on the held-out runs the tuned configuration is worse than the start in "
+                        f"{', '.join(worse)}: it may fit the tuned runs only (tune on more or longer runs)")
         header += ["#"] + [f"# {line}" for line in table.splitlines()]
     write_text_atomic(args.out, overlay_toml(params, "\n".join(header)))
-    print(f"best configuration: {args.out}", file=sys.stderr)
+    log.info(f"best configuration: {args.out}")
