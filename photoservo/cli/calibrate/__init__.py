@@ -38,13 +38,22 @@ from photoservo.vision.calibrate import MIN_ROTATION_DEG
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     sub = p.add_subparsers(dest="action", metavar="ACTION", required=True)
+    _board_parser(sub)
+    _stereo_parser(sub)
+    _hand_eye_parser(sub)
+    _water_parser(sub)
+    _capture_parser(sub)
 
+
+def _board_parser(sub) -> None:
     b = sub.add_parser("board", help="write a printable board image",
                        description="Write a printable calibration board (PNG) at a given resolution.")
     board_options(b)
     b.add_argument("--out", required=True, metavar="BOARD.png", help="image file to write (.png)")
     b.add_argument("--dpi", type=bounded(float, 10.0, 2400.0), default=300.0, help="print resolution (default 300)")
 
+
+def _stereo_parser(sub) -> None:
     s = sub.add_parser("stereo", help="calibrate both cameras and the stereo extrinsics",
                        description="Calibrate the stereo rig from image pairs of a board (paired by file "
                                    "name). " + BOARD_HELP + ".")
@@ -55,6 +64,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     s.add_argument("--free-k3", action="store_true", help="also fit k3 (wide-angle lenses; needs many views)")
     s.add_argument("--drop-outliers", action="store_true", help="calibrate again without the outlier views")
 
+
+def _hand_eye_parser(sub) -> None:
     h = sub.add_parser("hand-eye", help="the left camera's pose on the flange",
                        description="Eye-in-hand calibration: a board fixed in the world, seen by the left "
                                    "camera from several flange poses -> the rig's [hand_eye]. Pose CSV "
@@ -71,6 +82,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     h.add_argument("--force", action="store_true",
                    help=f"write the result even when the poses rotate less than {MIN_ROTATION_DEG:.0f} deg")
 
+
+def _water_parser(sub) -> None:
     w = sub.add_parser("water", help="the water surface height in the base frame",
                        description="Fit the water plane to a board or single ArUco markers (--markers) "
                                    "floating on it, seen by the calibrated rig (with [hand_eye]) from known "
@@ -94,6 +107,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     w.add_argument("--key", default="tracker.water_z_mm", metavar="SECTION.KEY",
                    help="config key for --update (default tracker.water_z_mm)")
 
+
+def _capture_parser(sub) -> None:
     c = sub.add_parser("capture", help="save synchronised pairs (and flange poses) for calibration",
                        description="Save stereo pairs from cameras, videos or folders, at an interval or "
                                    "on Enter ('q' + Enter ends), with a live preview in Rerun (corners "

@@ -54,8 +54,6 @@ class _EnterKey:
 def run_capture(args: argparse.Namespace) -> int:
     from photoservo.record.recorder import Recorder
 
-    if args.interval < 0 or args.count < 0:
-        raise InputError("--interval and --count must be >= 0")
     board = Board.parse(args.board, args.square_mm, args.charuco, args.marker_mm, args.dict) if args.board else None
     if args.require_board and board is None:
         raise InputError("--require-board needs --board")
@@ -64,11 +62,7 @@ def run_capture(args: argparse.Namespace) -> int:
     source = make_source(cameras_config(args, config.cameras))
     if args.spawn:
         check_display("--spawn")
-    link = None
-    if args.port:
-        from photoservo.robot.pa10 import fk
-
-        link = open_link(args.port, config.link)
+    link = open_link(args.port, config.link) if args.port else None
     rows, poses = _existing_rows(out / "capture.csv"), _existing_rows(out / "poses.csv")
     first = 1 + max((int(r[0]) for r in rows if r[0].isdigit()), default=-1)  # continue a session
     saved = 0
@@ -84,14 +78,7 @@ def run_capture(args: argparse.Namespace) -> int:
                 log.warning(w)
             t_next = time.monotonic()
             for frame in source:
-                dl = detect_board(frame.left, board) if board else None
-                dr = detect_board(frame.right, board) if board else None
-                if board is not None:
-                    rec.log_frame(frame.index, frame.t, draw_detection(frame.left, dl, board),
-                                  draw_detection(frame.right, dr, board), capture_times=(frame.t_left, frame.t_right))
-                else:
-                    rec.log_frame(frame.index, frame.t, frame.left, frame.right,
-                                  capture_times=(frame.t_left, frame.t_right))
+                dl, dr = _preview(rec, frame, board)
                 if enter is not None:
                     due = enter.take()
                     if not due and enter.quit:
@@ -104,17 +91,8 @@ def run_capture(args: argparse.Namespace) -> int:
                     print(f"  pair {frame.index}: board not in both images, not saved")
                     continue
                 name = f"{first + saved:04d}"
-                row = [name, f"{frame.t_left:.6f}", f"{frame.t_right:.6f}"]
-                if link is not None:
-                    try:
-                        q = link.state_at(frame.t).q
-                    except LookupError as e:
-                        print(f"  pair {frame.index}: no flange pose at its capture time ({e}), not saved")
-                        continue
-                    poses.append([name, *pose_row(fk(q)), *(f"{x:.6f}" for x in q)])
-                write_image_atomic(out / "left" / f"{name}.png", frame.left)
-                write_image_atomic(out / "right" / f"{name}.png", frame.right)
-                rows.append(row)
+                if not _save_pair(out, name, frame, link, rows, poses):
+                    continue
                 saved += 1
                 seen = "" if board is None else f", board {'found' if dl else 'NOT found'} left, " \
                                                   f"{'found' if dr else 'NOT found'} right"
@@ -127,13 +105,49 @@ def run_capture(args: argparse.Namespace) -> int:
         rec.close()
         if link is not None:
             link.close()
-        if rows:
-            write_text_atomic(out / "capture.csv", "name,t_left,t_right\n" + "".join(",".join(r) + "\n" for r in rows))
-        if poses:
-            header = ",".join(("name", *POSE_COLUMNS, *JOINT_COLUMNS))
-            write_text_atomic(out / "poses.csv", header + "\n" + "".join(",".join(r) + "\n" for r in poses))
+        _write_csvs(out, rows, poses)
     print(f"saved {saved} pairs to {out} ({stats}); preview recording {rec.path}")
     return 0
+
+
+def _save_pair(out: Path, name: str, frame, link, rows: list[list[str]], poses: list[list[str]]) -> bool:
+    """Write a pair's images and its rows (capture times; with a link, the flange pose at the
+    capture time). False, nothing written, when the arm's state at that time is not known."""
+    if link is not None:
+        from photoservo.robot.pa10 import fk
+
+        try:
+            q = link.state_at(frame.t).q
+        except LookupError as e:
+            print(f"  pair {frame.index}: no flange pose at its capture time ({e}), not saved")
+            return False
+        poses.append([name, *pose_row(fk(q)), *(f"{x:.6f}" for x in q)])
+    write_image_atomic(out / "left" / f"{name}.png", frame.left)
+    write_image_atomic(out / "right" / f"{name}.png", frame.right)
+    rows.append([name, f"{frame.t_left:.6f}", f"{frame.t_right:.6f}"])
+    return True
+
+
+def _preview(rec, frame, board: Board | None) -> tuple:
+    """Log a pair to the preview recording, with the found corners drawn when a board is given;
+    return the (left, right) detections (None without a board or when not found)."""
+    times = (frame.t_left, frame.t_right)
+    if board is None:
+        rec.log_frame(frame.index, frame.t, frame.left, frame.right, capture_times=times)
+        return None, None
+    dl, dr = detect_board(frame.left, board), detect_board(frame.right, board)
+    rec.log_frame(frame.index, frame.t, draw_detection(frame.left, dl, board), draw_detection(frame.right, dr, board),
+                  capture_times=times)
+    return dl, dr
+
+
+def _write_csvs(out: Path, rows: list[list[str]], poses: list[list[str]]) -> None:
+    """capture.csv (name and capture times) and, with --port, poses.csv (the poses CSV format)."""
+    if rows:
+        write_text_atomic(out / "capture.csv", "name,t_left,t_right\n" + "".join(",".join(r) + "\n" for r in rows))
+    if poses:
+        header = ",".join(("name", *POSE_COLUMNS, *JOINT_COLUMNS))
+        write_text_atomic(out / "poses.csv", header + "\n" + "".join(",".join(r) + "\n" for r in poses))
 
 
 def _existing_rows(path: Path) -> list[list[str]]:
