@@ -15,7 +15,7 @@ from photoservo.sim.renderer import random_scene
 from photoservo.vision.estimator import estimate
 from photoservo.vision.fitness import stereo_hue
 from photoservo.vision.photo_model import build_photo_model
-from photoservo.vision.seeding import group_pairs, match_blobs, target_blobs, union
+from photoservo.vision.seeding import blob_pairs, group_pairs, union
 
 CFG = load_config()
 
@@ -49,10 +49,8 @@ def test_union_of_pieces_is_the_whole_blob():
 def test_split_pieces_group_into_one_seed(split_crab):
     sc, model = split_crab
     frame = stereo_hue(sc.left, sc.right, CFG.fitness)
-    p = CFG.estimator
-    pairs = match_blobs(target_blobs(frame.left, model.target_hues, p.min_blob_px),
-                        target_blobs(frame.right, model.target_hues, p.min_blob_px), sc.rig, p)
-    groups = group_pairs(pairs, p)
+    pairs = blob_pairs(frame.left, frame.right, model, sc.rig, CFG.estimator)
+    groups = group_pairs(pairs, CFG.estimator)
     assert len(pairs) >= 2 and groups
     assert groups[0].left.area > max(pr.left.area for pr in pairs)
 

@@ -12,7 +12,7 @@ import pytest
 from photoservo.config import load_config
 from photoservo.vision.estimator import estimate
 from photoservo.vision.pose_search import Convergence, GeneSpace, PoseSearch, reflected_rotation
-from photoservo.vision.seeding import match_blobs, target_blobs
+from photoservo.vision.seeding import blob_pairs
 from photoservo.vision.fitness import stereo_hue
 from photoservo.vision.photo_model import build_photo_model
 from photoservo.geometry import heading_tilt_error, rotation_from_heading_tilt
@@ -76,9 +76,7 @@ def test_empty_water_is_not_found():
 def test_blobs_pair_along_epipolar_lines_and_triangulate(scene):
     sc, model = scene
     frame = stereo_hue(sc.left, sc.right, CFG.fitness)
-    p = CFG.estimator
-    pairs = match_blobs(target_blobs(frame.left, model.target_hues, p.min_blob_px),
-                        target_blobs(frame.right, model.target_hues, p.min_blob_px), sc.rig, p)
+    pairs = blob_pairs(frame.left, frame.right, model, sc.rig, CFG.estimator)
     assert pairs
     _, t, _ = truth(sc)
     # the blob centroid is near the model origin: depth within a few percent

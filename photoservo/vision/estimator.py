@@ -32,7 +32,7 @@ from photoservo.vision.hue_layout import layout_pairs
 from photoservo.vision.photo_model import HUE_BINS, PhotoModel
 from photoservo.vision.pose_search import Candidate, PoseSearch
 from photoservo.vision.rig import Rig
-from photoservo.vision.seeding import ModelShape, group_pairs, match_blobs, seed_genes, target_blobs
+from photoservo.vision.seeding import ModelShape, blob_pairs, group_pairs, seed_genes
 
 
 @dataclass(frozen=True)
@@ -157,9 +157,7 @@ def _islands(model: PhotoModel, rig: Rig, frame: StereoHue, ga_params: GAParams,
             # own): seed from where the photo's hue layout agrees (vision/hue_layout.py)
             pairs = layout_pairs(frame.left, frame.right, model, shape.area, rig, p)
         else:
-            bl = target_blobs(frame.left, model.target_hues, p.min_blob_px)
-            br = target_blobs(frame.right, model.target_hues, p.min_blob_px)
-            pairs = match_blobs(bl, br, rig, p)
+            pairs = blob_pairs(frame.left, frame.right, model, rig, p)
             # groups of pieces (a creature split by foam) beside the single blobs, largest first
             pairs = sorted(group_pairs(pairs, p) + pairs, key=lambda bp: -bp.left.area)
         pairs = pairs[: p.max_candidates]

@@ -142,6 +142,14 @@ def match_blobs(left: list[Blob], right: list[Blob], rig: Rig, params: Estimator
     return pairs
 
 
+def blob_pairs(hue_left: np.ndarray, hue_right: np.ndarray, model: PhotoModel, rig: Rig,
+               params: EstimatorParams) -> list[BlobPair]:
+    """The model's target-hue blobs of both hue images (`target_blobs`, min_blob_px) paired along
+    the epipolar lines (`match_blobs`)."""
+    return match_blobs(target_blobs(hue_left, model.target_hues, params.min_blob_px),
+                       target_blobs(hue_right, model.target_hues, params.min_blob_px), rig, params)
+
+
 def group_pairs(pairs: list[BlobPair], params: EstimatorParams) -> list[BlobPair]:
     """Stereo-consistent groups of nearby blob pairs, each as one pair of `union` blobs: the
     pieces of one creature that foam, a glint or a wave crest cut apart. Two pairs are near when
