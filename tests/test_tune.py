@@ -60,6 +60,8 @@ def test_space_errors_name_the_key_and_value(spec: str, says: str):
     (["--space", "servo.nope=1:2", "--worlds", "1"], "unknown config key 'servo.nope'"),
     (["--space", "servo.k_position=0.5:4", "--worlds", "1", "--objectives", "hold,speed"], "objective 'speed'"),
     (["--space", "servo.k_position=0.5:4", "--recordings", "x.rrd"], "objective 'hold' needs a closed loop"),
+    (["--space", "tracker.gain_position=0.2:0.9", "--recordings", "x.rrd", "--objectives", "track"],
+     "x.rrd: recording not found"),
     (["--space", "servo.k_position=0.5:4", "--worlds", "1", "--trials", "0"], "--trials 0"),
     (["--space", "servo.k_position=0.5:4", "--worlds", "1", "--settle", "9"], "--settle 9"),
 ])

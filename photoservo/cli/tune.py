@@ -157,7 +157,7 @@ class _Progress:
 
 
 def run(args: argparse.Namespace) -> int:
-    from photoservo.tune.objectives import Sources, check_objectives
+    from photoservo.tune.objectives import check_objectives
     from photoservo.tune.runner import Job, run_jobs, stop_after_trial
     from photoservo.tune.space import build_space
     from photoservo.tune.study import StudySpec, _redact, completed, open_study, storage_url
@@ -165,7 +165,10 @@ def run(args: argparse.Namespace) -> int:
     space = build_space(args.space, args.space_file, args.overrides)
     names, weights = _objectives(args)
     tuned, held = _sources(args, need_track="track" in names)
-    check_objectives(names, tuned)
+    check_objectives(names, tuned.closed_loop)
+    for src in (tuned, held):
+        if src is not None:
+            src.check_files()
     spec = StudySpec(args.study, storage_url(args.storage), tuple(space), names, weights, args.trials, args.seed,
                      runs=tuned.describe() + " | " + " ".join(args.overrides))
     study = open_study(spec, _start_params(args, space))

@@ -77,6 +77,13 @@ class Sources:
         if self.world_seeds and not 0 <= self.settle_s < self.duration_s:
             raise InputError(f"--settle {self.settle_s}: must be in 0..--duration ({self.duration_s} s)")
 
+    def check_files(self) -> None:
+        """Every recording exists (a one-line error before the study, not after it)."""
+        from photoservo.record.reader import recording_files
+
+        for p in (*self.world_from, *self.recordings):
+            recording_files(p)
+
     @property
     def closed_loop(self) -> bool:
         return bool(self.world_seeds or self.world_from)
@@ -206,11 +213,11 @@ def measure(src: Sources, params: dict[str, Any]) -> Measurement:
     return Measurement(scores, runs)
 
 
-def check_objectives(names: Sequence[str], src: Sources) -> None:
-    """Every objective is a known score that these sources can measure."""
+def check_objectives(names: Sequence[str], closed_loop: bool) -> None:
+    """Every objective is a known score that the runs (closed loop: worlds) can measure."""
     for n in names:
         if n not in OBJECTIVES:
             raise InputError(f"objective '{n}': not one of {', '.join(OBJECTIVES)}")
-        if n == "hold" and not src.closed_loop:
+        if n == "hold" and not closed_loop:
             raise InputError("objective 'hold' needs a closed loop (--worlds N or --world-from REC): "
                              "a replay does not move the arm")
