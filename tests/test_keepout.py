@@ -11,6 +11,7 @@ import pytest
 from photoservo.config import load_config
 from photoservo.errors import InputError
 from photoservo.robot.pa10 import HOME_Q, load_limits
+from photoservo.servo.keepout import FEATURES
 from photoservo.servo.motion import Motion
 
 PARAMS = load_config().motion
@@ -60,7 +61,7 @@ def test_volumes_catch_what_the_points_missed():
     # elbow, wrist, flange and tool all above a plane at 500 mm at home (lowest: the flange at
     # 624.7), but the camera rig hangs under the flange: its box reaches 454.7 mm
     m = Motion(dataclasses.replace(PARAMS, z_min_mm=500.0), LIM)
-    P = m.keepout_points(HOME_Q)
+    P = dict(zip(FEATURES, m.keepout.features(HOME_Q)[0]))
     assert min(P[n][2] for n in ("elbow", "wrist", "flange", "tool")) > 500.0
     with pytest.raises(InputError, match="camera rig box would go below the water plane"):
         m.check_target(HOME_Q)

@@ -12,12 +12,8 @@ import pytest
 from photoservo.errors import InputError
 from photoservo.robot.pa10 import HOME_Q, dls_step, jacobian, load_limits
 from photoservo.servo import motion as motion_module
-from photoservo.servo.motion import (
-    Motion,
-    MotionParams,
-    stopping_distance,
-    stopping_speed,
-)
+from photoservo.servo.braking import stopping_distance, stopping_speed
+from photoservo.servo.motion import Motion, MotionParams
 from photoservo.tomlconf import build_dataclass, configs_dir, read_toml
 
 LIM = load_limits()
@@ -258,17 +254,16 @@ def test_docstring_example_runs():
 def test_keepout_point_jacobians_match_finite_differences():
     m = Motion(dataclasses.replace(PARAMS, tool_offset_mm=(10.0, -20.0, 150.0)), LIM)
     q = HOME_Q + np.array([0.3, -0.2, 0.5, 0.1, -0.7, 0.2, 0.4])
-    names, P, J = m._point_jacobians(q)
-    np.testing.assert_allclose(P, np.array(list(m.keepout_points(q).values())), atol=1e-9)
+    P, J = m.keepout.point_jacobians(q)
+    np.testing.assert_allclose(P, m.keepout.features(q)[0], atol=1e-9)
     np.testing.assert_allclose(J[-1], jacobian(q, m.T_flange_tool)[:3], atol=1e-9)
     h = 1e-6
     for i in range(7):
         e = np.zeros(7)
         e[i] = h
-        Pp = np.array(list(m.keepout_points(q + e).values()))
-        Pm = np.array(list(m.keepout_points(q - e).values()))
+        Pp = m.keepout.features(q + e)[0]
+        Pm = m.keepout.features(q - e)[0]
         np.testing.assert_allclose(J[:, :, i], (Pp - Pm) / (2 * h), atol=1e-4)
-    assert names == list(m.keepout_points(q))
 
 
 def test_random_mode_switches_never_break_limits_ranges_or_keepout():

@@ -32,6 +32,7 @@ from collections.abc import Callable
 import numpy as np
 
 from photoservo.robot.pa10 import DH_D_MM, fk_frames, link_capsules
+from photoservo.servo.braking import stopping_speed
 
 #: `Keepout.features`' rows: the moving capsule ends, the rig box corners, the tool point (last,
 #: as servo/motion.py's tool-speed cap reads it)
@@ -115,6 +116,25 @@ class Keepout:
         c, f, b = self.clearance(Q)
         k = int(np.argmin(c))
         return "" if c[k] >= 0 else self.describe(float(c[k]), int(f[k]), int(b[k]))
+
+    def approach_caps(self, P: np.ndarray, J: np.ndarray, dq: np.ndarray, lead_s: float, a_cart: float,
+                      j_cart: float, margin_mm: float) -> tuple[np.ndarray, list[str]]:
+        """Velocity-target filter (so the braking check rarely has to stop the arm): each feature
+        (P (K, 3) mm, Jacobians J (K, 3, 7) from `point_jacobians`) approaching a boundary is
+        capped at the speed from which it could stop, with a nominal Cartesian deceleration
+        a_cart (mm/s²) and jerk j_cart (mm/s³), lead_s ahead and margin_mm inside the boundary,
+        by scaling the whole joint velocity dq (rad/s) down (the arm slows along the commanded
+        motion). Returns the scaled dq and the volumes that were slowed. Heuristic; the braking
+        check (`sweep_violation`) is the guarantee."""
+        V = J @ dq  # (K, 3) feature velocities (mm/s)
+        approach = np.concatenate([-V, V], axis=1)  # toward the lower faces, toward the upper faces
+        clearance = np.concatenate([P - self.lo, self.hi - P], axis=1) - self.radius[:, None] - margin_mm
+        allow = stopping_speed(clearance - lead_s * np.maximum(approach, 0), a_cart, j_cart)
+        over = approach > allow
+        if not over.any():
+            return dq, []
+        scale = float(np.min(allow[over] / approach[over]))
+        return dq * scale, list(dict.fromkeys(FEATURES[k].split(" corner")[0] for k in np.flatnonzero(over.any(axis=1))))
 
     def speed_bound(self, v_joint: np.ndarray) -> float:
         """Highest speed (mm/s) of any volume point with joint speeds |dq_j| <= v_joint (rad/s)."""

@@ -6,39 +6,32 @@ One step per control period (default 250 Hz), starting from the measured joint s
     inp.current_position, inp.current_velocity = q_meas, dq_meas
     otg.update(inp, out)  ->  Setpoint(out.new_position, out.new_velocity, out.new_acceleration)
 
-The measured state is late (the line, the bridge's control period), so re-planning every step
-from it closes a loop with a delay around a time-optimal controller, which limit-cycles around
-the target (tests/test_motion.py::test_lagging_arm_reaches_the_target_and_settles). So each step
-first compares the measured joints with the setpoints of the last `track_window_s`: when one of
-them is within `track_tolerance_deg` on every joint, the arm is following the plan and the step
-continues from the last setpoint (Ruckig's pass_to_input); otherwise the step starts from the
-measured state (and says so in `reason`): at the first step, after a fault, when the arm lags or
-was pushed. `track_tolerance_deg = 0` re-plans from the measured state at every step. The arm
-does not report acceleration: a re-plan starts from the last commanded one. Pure code: arrays
-in, setpoints out, no I/O and no clock.
+The measured state is late (line, bridge period), so re-planning every step from it limit-cycles
+around the target (tests/test_motion.py::test_lagging_arm_reaches_the_target_and_settles). So a
+step continues from the last setpoint (Ruckig's pass_to_input) while the measured joints are
+within `track_tolerance_deg` of one of the setpoints of the last `track_window_s`, and otherwise
+starts from the measured state, saying so in `reason` (first step, after a fault, an arm that
+lags or was pushed; `track_tolerance_deg = 0` always re-plans). A re-plan starts from the last
+commanded acceleration. Pure code: arrays in, setpoints out, no I/O and no clock.
 
-Ruckig's free edition ignores position limits, so the safety layer is ours. Each step, on top
-of the plain Ruckig step:
+Ruckig's free edition ignores position limits, so the safety layer is ours, on top of each step:
 
 1. Speed override (0-100 %) scales the joint speed limits; 0 % makes a controlled stop.
-2. Joint ranges: every joint keeps `joint_margin_deg` clear of its range ends for targets.
-   While moving, a joint's speed toward a range end is capped at the speed from which it can
-   still stop (jerk-limited) within half the margin of that end: it slows down before it would
-   overrun. Likewise a velocity target is scaled down when a keep-out point approaches the
-   water plane or a box face faster than it could stop before it.
-3. Tool-speed cap: the speed of the tool point is kept under `tool_speed_max_mm_s` (velocity
-   targets are scaled down; a move is time-scaled, v·s, a·s², j·s³, which keeps its path).
-4. Braking check: the step is accepted only if a controlled stop started from the new setpoint
-   would stay inside the joint ranges (less half the margin), and keep the arm's VOLUMES (link
-   capsules, the camera rig + tool box; servo/keepout.py) above the water plane (`z_min_mm`)
-   and inside the workspace box, checked continuously along the stop, as a move's whole path
-   is when its target is adopted.
-   Otherwise the arm is told to stop instead: while the arm follows the plan the step starts
-   from the last setpoint, whose stop was checked, so that stop is safe; after a re-plan from
-   an off-plan measured state, stopping is still the best there is.
+2. Joint ranges: targets keep `joint_margin_deg` clear of the range ends; while moving, a
+   joint's speed toward an end is capped at the speed from which it can still stop (jerk-
+   limited) within half the margin. Velocity targets are likewise scaled down when a keep-out
+   volume approaches the water plane or a box face (servo/keepout.py approach_caps).
+3. Tool-speed cap under `tool_speed_max_mm_s` (velocity targets scaled down; a move is
+   time-scaled, v·s, a·s², j·s³, which keeps its path).
+4. Braking check: a step is accepted only if a controlled stop from it stays inside the joint
+   ranges (less half the margin) and keeps the arm's VOLUMES (link capsules, the camera rig +
+   tool box) above the water plane (`z_min_mm`) and inside the workspace box, checked
+   continuously along the stop (servo/keepout.py), as a move's whole path is when adopted.
+   Otherwise the arm is told to stop: while it follows the plan that stop was checked; after a
+   re-plan from an off-plan state, stopping is still the best there is.
 
-Every step returns what the arm will actually be told after these clamps, with `reason`
-saying which one acted ("" when none did), as LeRobot's `send_action` does.
+Every step returns what the arm will actually be told, `reason` naming the clamp that acted
+("" when none did), as LeRobot's `send_action` does.
 
 Frames and units: joint angles in rad, base frame in mm (z up), time in s.
 """
@@ -62,7 +55,8 @@ from ruckig import (
 )
 
 from photoservo.errors import InputError
-from photoservo.servo.keepout import FEATURES, Keepout
+from photoservo.servo.braking import stopping_speed
+from photoservo.servo.keepout import Keepout
 from photoservo.robot.pa10 import (
     JOINT_NAMES,
     N_JOINTS,
@@ -131,21 +125,6 @@ class Setpoint:
     reason: str = ""
 
 
-def stopping_distance(v: np.ndarray, a_max: np.ndarray, j_max: np.ndarray) -> np.ndarray:
-    """Distance to stop from speed |v| with zero initial acceleration, jerk-limited:
-    |v| <= a²/j: d = |v|·sqrt(|v|/j); else d = |v|/2 · (|v|/a + a/j)."""
-    v = np.abs(v)
-    return np.where(v <= a_max**2 / j_max, v * np.sqrt(v / j_max), 0.5 * v * (v / a_max + a_max / j_max))
-
-
-def stopping_speed(d: np.ndarray, a_max: np.ndarray, j_max: np.ndarray) -> np.ndarray:
-    """Inverse of `stopping_distance`: the highest speed that can still stop within d >= 0."""
-    d = np.maximum(d, 0.0)
-    short = (d * d * j_max) ** (1.0 / 3.0)
-    long_ = 0.5 * (-a_max**2 / j_max + np.sqrt(a_max**4 / j_max**2 + 8.0 * a_max * d))
-    return np.where(d <= a_max**3 / j_max**2, short, long_)
-
-
 class Motion:
     """Online jerk-limited motion at the control rate: position moves, velocity following and a
     controlled stop, each step from the measured joint state, with the safety layer above.
@@ -193,8 +172,7 @@ class Motion:
         self._brake_inp.target_acceleration = np.zeros(N_JOINTS)
         self._brake_inp.synchronization = Synchronization.No  # as stop_step brakes
         self._traj = Trajectory(N_JOINTS)
-        # nominal Cartesian deceleration / jerk for the keep-out approach caps: what the weakest
-        # joint gives at a 500 mm lever (mm/s², mm/s³)
+        # keep-out approach caps: the weakest joint's deceleration / jerk at a 500 mm lever
         self._a_cart = float(limits.ddq_max.min()) * 500.0
         self._j_cart = float(limits.dddq_max.min()) * 500.0
         self.keepout = Keepout(params.z_min_mm, params.workspace_min_mm, params.workspace_max_mm,
@@ -208,8 +186,6 @@ class Motion:
         self._time_scale = 1.0
         self.done = False
 
-    # ---------------------------------------------------------------- configuration and checks
-
     @property
     def speed_override_pct(self) -> float:
         return 100.0 * self._override
@@ -220,13 +196,6 @@ class Motion:
             raise InputError(f"speed override {pct} % is outside 0..100 %")
         self._override = pct / 100.0
         self._target = None  # re-plan (and re-scale) the current move at the new speed
-
-    def keepout_points(self, q: np.ndarray) -> dict[str, np.ndarray]:
-        """Base-frame positions (mm) of the keep-out features (servo/keepout.py FEATURES): name ->
-        (3,) for q of shape (7,), or (N, 3) for a batch (N, 7)."""
-        P = self.keepout.features(q)
-        P = P[0] if np.ndim(q) == 1 else P
-        return {name: P[..., k, :] for k, name in enumerate(FEATURES)}
 
     def keepout_violation(self, q: np.ndarray) -> str:
         """'' when the arm's volumes at q (rad; (7,) or a path (N, 7)) are above the water plane
@@ -253,8 +222,6 @@ class Motion:
             if why:
                 raise InputError(f"target: the path to it: {why}")
 
-    # ------------------------------------------------------------------------ the three steps
-
     def move_step(self, q_meas: np.ndarray, dq_meas: np.ndarray, q_target: np.ndarray) -> Setpoint:
         """One period of a jerk-limited move to q_target (rad), from the measured q (rad) and
         dq (rad/s). A target outside the ranges/keep-out is refused: the arm stops and `reason`
@@ -277,7 +244,7 @@ class Motion:
         inp.target_acceleration = np.zeros(N_JOINTS)
         reasons = [note] if note else []
         v_cap_lo, v_cap_hi = self._range_caps(q_meas)
-        _, P, J = self._point_jacobians(q_meas)
+        _, J = self.keepout.point_jacobians(q_meas)
         sp = None
         for _ in range(3):
             s = self._time_scale
@@ -325,8 +292,8 @@ class Motion:
         if m > 1.0:
             dq_t /= m  # keep the direction
             reasons.append("joint speed limit")
-        names, P, J = self._point_jacobians(q_meas)
-        dq_t, near = self._keepout_caps(names, P, J, dq_t)
+        P, J = self.keepout.point_jacobians(q_meas)
+        dq_t, near = self.keepout.approach_caps(P, J, dq_t, 2 * self.dt, self._a_cart, self._j_cart, self._CAP_MARGIN_MM)
         if near:
             reasons.append("keep-out: slowing the " + ", ".join(near))
         v_cap_lo, v_cap_hi = self._range_caps(q_meas)
@@ -375,8 +342,6 @@ class Motion:
         self._emit(sp)
         self.done = result == Result.Finished
         return sp
-
-    # -------------------------------------------------------------------------------- internals
 
     def _seed(self, q_meas, dq_meas) -> tuple[np.ndarray, np.ndarray, str]:
         """The state a step starts from: the last setpoint while the measured joints are within
@@ -491,31 +456,6 @@ class Motion:
         hi = stopping_speed(self.q_hi_safe - q - ahead, a, j)
         return lo, hi
 
-    def _point_jacobians(self, q: np.ndarray) -> tuple[list[str], np.ndarray, np.ndarray]:
-        """Keep-out feature names, positions P (K, 3) (mm, base frame) and Jacobians J (K, 3, 7)."""
-        P, J = self.keepout.point_jacobians(q)
-        return list(FEATURES), P, J
-
-    def _keepout_caps(self, names: list[str], P: np.ndarray, J: np.ndarray, dq: np.ndarray) -> tuple[np.ndarray, list[str]]:
-        """Velocity-target filter for the Cartesian keep-out (so the braking check rarely has to
-        stop the arm): for each keep-out point and each boundary (water plane, box faces), the
-        point's approach speed is capped at the speed from which it could stop, with a nominal
-        Cartesian deceleration and jerk, two periods ahead, before the boundary, by scaling the
-        whole dq down (the arm slows along the commanded motion; no joint is moved that was
-        not asked to). Heuristic; the braking check is the guarantee."""
-        p = self.params
-        lo = np.array([p.workspace_min_mm[0], p.workspace_min_mm[1], max(p.z_min_mm, p.workspace_min_mm[2])])
-        hi = np.asarray(p.workspace_max_mm)
-        V = J @ dq  # (K, 3) point velocities (mm/s)
-        approach = np.concatenate([-V, V], axis=1)  # toward the lower faces, toward the upper faces
-        clearance = np.concatenate([P - lo, hi - P], axis=1) - self.keepout.radius[:, None] - self._CAP_MARGIN_MM
-        allow = stopping_speed(clearance - 2 * self.dt * np.maximum(approach, 0), self._a_cart, self._j_cart)
-        over = approach > allow
-        if not over.any():
-            return dq, []
-        scale = float(np.min(allow[over] / approach[over]))
-        return dq * scale, list(dict.fromkeys(n.split(" corner")[0] for n, o in zip(names, over.any(axis=1)) if o))
-
     def _tool_speed(self, q: np.ndarray, dq: np.ndarray) -> float:
         return float(np.linalg.norm(jacobian(q, self.T_flange_tool)[:3] @ dq))
 
@@ -549,11 +489,9 @@ class Motion:
         return out
 
     def _keepout_on_brake(self, q_start: np.ndarray, sp: Setpoint, dq_travel: np.ndarray) -> str:
-        """Keep-out along the braking trajectory in self._traj, from sp. Checked only when the
-        volumes at q_start (the step's start) are closer to a boundary than the most the step
-        and the stop could move them (joint j turning by |dq_j| moves a point by at most |dq_j|
-        times the reach beyond joint j); then continuously, with the stop's joint speeds bounded
-        by |dq| + ddq²/(2·jerk) (the acceleration still rising while the jerk takes it to 0)."""
+        """Keep-out along the braking trajectory in self._traj, from sp: checked when the volumes
+        at q_start are nearer a boundary than the step and stop could move them (|dq_j| x the
+        reach beyond joint j), then continuously with joint speeds <= |dq| + ddq²/(2·jerk)."""
         c0 = float(self.keepout.clearance(q_start[None])[0][0])
         if c0 > float(dq_travel @ self.keepout.reach_mm) + 1e-6:
             return ""
