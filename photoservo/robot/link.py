@@ -36,13 +36,11 @@ from photoservo.robot.pa10 import fk
 
 
 class Link:
-    """Serial client of the bridge. See the module docstring for the life cycle.
-
-    Setpoints are paced by the line's baud rate (`params.baud`): a setpoint is dropped (and
-    counted) while more than MAX_BACKLOG_FRAMES setpoints' worth of bytes are still due on the
-    line, because the OS would queue it behind them — a pty or a USB adapter buffers kilobytes,
-    i.e. hundreds of milliseconds of stale setpoints at 115200 baud. Control messages are
-    always sent.
+    """Serial client of the bridge (life cycle: the module docstring). Setpoints are paced by
+    the line's baud rate (`params.baud`): a setpoint is dropped (and counted) while more than
+    MAX_BACKLOG_FRAMES setpoints' worth of bytes are still due on the line, because the OS
+    would queue it behind them — a pty or a USB adapter buffers kilobytes, i.e. hundreds of
+    milliseconds of stale setpoints at 115200 baud. Control messages are always sent.
 
     Args:
         port: device path (/dev/ttyUSB0, /dev/pts/N) or pyserial URL (socket://, rfc2217://...).
@@ -159,10 +157,9 @@ class Link:
             self.close()
 
     def safe_stop(self, timeout: float = 5.0) -> str:
-        """Controlled stop and servo off if the servo was switched on and the bridge still
-        answers (also after the link-quality gate tripped: control messages are retried).
-        Returns "" when done or not needed, else what failed — then the bridge's own setpoint
-        watchdog stops the arm, since no more setpoints come."""
+        """Controlled stop and servo off if the servo is on and the bridge answers (also after
+        the quality gate tripped). Returns "" when done or not needed, else a sentence saying
+        the bridge's setpoint watchdog stops the arm (no more setpoints come)."""
         if not self._servo_requested or self._error is not None or self._ser is None:
             return ""
         try:
