@@ -17,7 +17,7 @@ real bridge on its own hardware), on a real pty, pacing bytes at the given baud 
    Motion.move_step (Ruckig + safety layer) -> send_setpoint), shipped watchdog (3 periods):
    alone; next to a numpy/OpenCV thread (blur, HSV, matmul on 640x480 stereo); next to the real
    GA (`vision.estimator.estimate` on examples/scene, in a loop); next to a thread logging
-   640x480 stereo frames at 30 fps to Rerun (`record.recorder.Recorder`, lossless); and with
+   640x480 stereo frames at 30 fps to Rerun (`record.recorder.Recorder`, default mode); and with
    the GA + Rerun load in the main process but control + link in their OWN process
    (multiprocessing). Period error = |actual period - 4 ms|: p50, p99, max; watchdog firings
    (rising edges of the WATCHDOG status bit) and refused setpoints.
@@ -314,7 +314,8 @@ def load_ga(stop: threading.Event) -> None:
 
 
 def load_rerun(stop: threading.Event) -> None:
-    """A thread logging 640x480 stereo frames to Rerun at 30 fps (lossless, as `track` does)."""
+    """A thread logging 640x480 stereo frames to Rerun at 30 fps (the default [recording] mode,
+    as `track` does)."""
     from photoservo.config import load_config
     from photoservo.record.recorder import Recorder
 
@@ -322,7 +323,7 @@ def load_rerun(stop: threading.Event) -> None:
     rng = np.random.default_rng(1)
     frames = [rng.integers(0, 255, (480, 640, 3), np.uint8) for _ in range(4)]
     with tempfile.TemporaryDirectory() as d, \
-            Recorder.open(Path(d) / "bench.rrd", "bench", mode=cfg.recording.mode, segment_s=0.0) as rec:
+            Recorder.from_config(cfg.recording, "bench", Path(d) / "bench.rrd") as rec:
         rate = Rate(30.0)
         k = 0
         while not stop.is_set():

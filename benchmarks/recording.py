@@ -1,26 +1,30 @@
-"""Recording cost per encoding (issue 6 item 7): 640x480 stereo at 30 fps.
+"""Recording cost and replay fidelity per recording mode (issue 13): 640x480 stereo at 30 fps.
 
-For each frame encoding of `record.recorder` (lossless = raw pixels + rerun's LZ4, png,
-preview JPEG) and two kinds of
-frames (the synthetic renderer's water scene as rendered, and the same with 2.5 DN sensor noise
-like a real camera), it records N stereo frames through `Recorder` and reports:
+Size and cost: for each mode (compact with an AV1 / H.264 / no video, full, preview) and three
+kinds of frames — the simulator as `track --sim` sees it (the renderer's water scene, cameras
+following the drift), the same with 2.5 DN sensor noise, and the second generator's harbour
+scenes 0-2 (`sim/harbour.py`: its own water, light, foam and 2-6 DN noise; fresh 2 DN noise per
+frame so frames differ as a camera's do; in scene 1 the murky water's noisy hue crosses into
+the squid's target hues on a third of the pixels) — it logs N stereo frames through `Recorder`, paced at
+30 fps as a session would, each with what `track` logs besides (estimate with projected
+points, truth, timings, 17 arm samples of the control loop), and reports:
 
-  loop ms/frame    median time the calling loop spends in `log_frame` (png/preview encode on
-                   a worker thread: a copy + queue hand-off, unless the queue is full because
-                   the encoder cannot keep up — then the loop waits)
-  total ms/frame   wall time from the first frame to the file closed, per frame (the CPU the
-                   recording really costs, whichever thread pays it)
-  cpu ms/frame     CPU time of the whole process (every thread, rerun's own compression and
-                   writing included) per frame: the honest cost on a loaded machine
-  encode ms/frame  time spent encoding one stereo frame (both images)
-  MB/min           file size per minute of 30 fps stereo
-  read fps         `reader.iter_frames` read-back speed (stereo frames/s, decoded)
-  exact            frames read back bit-equal to those logged
-and the per-frame cost of the other logs of a tracking frame (estimate with projected points,
-timings, 17 arm samples of a 500 Hz control loop), and the stall at a segment change.
+  MB/min      file size per minute of 30 fps stereo
+  loop ms     median time per frame the loop spends in the recorder's calls (compact and
+              preview encode on worker threads: the loop copies and queues)
+  cpu ms      CPU time of the whole process per frame (workers and rerun's writer included):
+              what recording really costs on a loaded machine
+  encode ms   worker time per frame spent encoding planes and video (wall, both workers)
 
-Prints a table and writes benchmarks/out/recording.json (median of `--repeats` runs).
-Run: python benchmarks/recording.py [--frames 150] [--repeats 3]
+Replay fidelity: one `track --sim --lockstep` session (seeded: the same frames every time) is
+recorded in each mode and replayed with tracker / GA / estimator / fitness-weight / servo keys
+changed; a mode is BIT-EXACT when every replayed frame's status, fitness, generations, position
+and alpha, and every open-loop command, equal those of the full frames' replay ("identical").
+Also: the replay with the recorded config reproduces the recorded estimates.
+
+Prints two tables and writes benchmarks/out/recording.json (medians of `--repeats` runs).
+Run: python benchmarks/recording.py [--frames 300] [--repeats 3] [--skip-fidelity]
+The machine is shared by several engineers: note the load printed with the results.
 """
 
 from __future__ import annotations
@@ -35,153 +39,193 @@ from pathlib import Path
 
 import numpy as np
 
-from photoservo.fileio import write_text_atomic
 from photoservo.config import load_config
-from photoservo.record.recorder import MODES, Recorder
-from photoservo.record.reader import iter_frames
-from photoservo.vision.photo_model import build_photo_model
-from photoservo.sim.specimens import specimen
-from photoservo.sim.renderer import (
-    CameraEffects,
-    Scene,
-    calm_water,
-    floater_from_model,
-    lying_on_water,
-    render_stereo,
-    synthetic_rig,
-)
+from photoservo.fileio import write_text_atomic
+from photoservo.record import recorder as recorder_module
+from photoservo.record.recorder import Recorder
+from photoservo.vision.fitness import project_model, stereo_hue
 
 FPS = 30.0
-DISTINCT = 8  # distinct rendered stereo frames, cycled (rendering is slower than recording)
+DISTINCT = 45   # distinct stereo frames per kind (1.5 s), cycled
+MODES = (("compact", "av1"), ("compact", "h264"), ("compact", "none"), ("full", "none"), ("preview", "av1"))
+KEYS = ["ga.population=12", "tracker.generations_per_frame=3", "tracker.gain_position=0.5",
+        "estimator.threshold=0.5", "fitness.w_outer_mismatch=0.7", "servo.k_position=0.3"]
 
 
-def render_frames(noise_sigma: float) -> list[tuple[np.ndarray, np.ndarray]]:
-    """Stereo frames of a squid on moving water seen from 600 mm above, camera looking down."""
-    photo = specimen("squid", 0)
-    model = build_photo_model(photo, load_config().photo_model)
-    rig = synthetic_rig()
-    scene = Scene(water=calm_water(3), target=floater_from_model(
-        photo, model, model.size_px[0] / 180.0, lying_on_water(np.zeros(3), 0.4)))
-    fx = CameraEffects(noise_sigma=noise_sigma)
+class Frames:
+    """N distinct stereo frames of one kind with what the loop has for them: the fitness input
+    (hue planes), a model, a projection of it and a truth pose."""
+
+    def __init__(self, name: str, pairs: list, model, rig, cfg) -> None:
+        self.name, self.pairs, self.model = name, pairs, model
+        self.hues = [stereo_hue(l, r, cfg.fitness) for l, r in pairs]
+        self.proj = project_model(np.eye(3), np.array([0.0, 0.0, 600.0]), 2.0, model, rig)
+
+
+def sim_frames(cfg, noise: float) -> Frames:
+    """The simulator's frames along its drift, as `track --sim` renders them."""
+    from photoservo.robot import pa10
+    from photoservo.servo.session import build_sim
+
+    sim = build_sim(cfg)
+    T0 = pa10.fk(sim.q0) @ sim.rig.T_flange_left()
     rng = np.random.default_rng(0)
-    out = []
+    pairs = []
     for k in range(DISTINCT):
-        T = np.eye(4)
-        T[:3, :3] = np.diag([1.0, -1.0, -1.0])
-        T[:3, 3] = (50.0 + 3 * k, -20.0, 600.0)
-        out.append(render_stereo(scene, rig, T, t=k / FPS, rng=rng, effects=(fx, fx)))
-    return out
+        t = k / FPS
+        T = T0.copy()
+        T[:3, 3] += sim.scene.motion.v * t
+        left, right = sim.scene.render(T, t, T, t + cfg.sim.lr_skew_s)
+        if noise:
+            left, right = (np.clip(im + rng.normal(0, noise, im.shape), 0, 255).astype(np.uint8) for im in (left, right))
+        pairs.append((left, right))
+    return Frames("sim" + (f"+noise{noise:g}" if noise else ""), pairs, sim.scene.model, sim.rig, cfg)
 
 
-def run_once(frames: list, mode: str, n: int, folder: Path) -> dict:
-    path = folder / f"bench_{mode}.rrd"
+def harbour_frames(cfg, seed: int) -> Frames:
+    """A harbour scene (the second generator) with fresh 2 DN noise per frame."""
+    from photoservo.sim import harbour
+    from photoservo.vision.photo_model import build_photo_model
+
+    sc = harbour.random_scene(seed, cfg.synthetic, cfg.photo_model, kind="squid")
+    rng = np.random.default_rng(seed)
+    pairs = [tuple(np.clip(im + rng.normal(0, 2.0, im.shape), 0, 255).astype(np.uint8) for im in (sc.left, sc.right))
+             for _ in range(DISTINCT)]
+    return Frames(f"harbour {seed}", pairs, build_photo_model(sc.photo, cfg.photo_model), sc.rig, cfg)
+
+
+def run_once(fr: Frames, mode: str, video: str, n: int, folder: Path, cfg) -> dict:
+    from photoservo.sim.renderer import synthetic_rig
+    from photoservo.tomlconf import dump_config
+    from photoservo.vision.rig import dump_rig
+
+    path = folder / f"bench_{mode}_{video}.rrd"
     loop = []
+    T = np.eye(4)
     c0, t0 = time.process_time(), time.perf_counter()
-    with Recorder.open(path, "bench", mode=mode) as rec:
+    with Recorder.open(path, "bench", mode=mode, video=video) as rec:
+        rec.log_static_setup(dump_rig(synthetic_rig()), None, fr.model, dump_config(cfg), seed=0)
         for k in range(n):
-            left, right = frames[k % len(frames)]
-            t1 = time.perf_counter()
-            rec.log_frame(k, k / FPS, left, right)
-            loop.append(time.perf_counter() - t1)
-    total, cpu = time.perf_counter() - t0, time.process_time() - c0
-    size = path.stat().st_size
-    t2 = time.perf_counter()
-    exact, count = True, 0
-    for f in iter_frames(path):
-        left, right = frames[f.index % len(frames)]
-        exact &= bool(np.array_equal(f.left, left) and np.array_equal(f.right, right))
-        count += 1
-    read = time.perf_counter() - t2
-    path.unlink()
-    return {"loop_ms": 1e3 * statistics.median(loop), "total_ms": 1e3 * total / n,
-            "cpu_ms": 1e3 * cpu / n,
-            "encode_ms": 1e3 * rec.encode_s / n, "mb_per_min": size / 1e6 / (n / FPS) * 60,
-            "read_fps": count / read, "exact": exact and count == n}
-
-
-def other_costs(folder: Path, n: int = 300) -> dict:
-    """Per-call cost of the non-image logs of one tracking frame: log_estimate (with the
-    projected points of a 1500-point model), log_timings (5 stages), and 17 log_arm calls
-    (500 Hz control at 30 fps) whose flush happens in the next log_frame."""
-    from photoservo.vision.fitness import project_model
-    photo = specimen("squid", 0)
-    model = build_photo_model(photo, load_config().photo_model)
-    rig = synthetic_rig()
-    proj = project_model(np.eye(3), np.array([0.0, 0.0, 600.0]), 2.0, model, rig)
-    small = np.zeros((8, 8, 3), np.uint8)
-    est, arm, frame = [], [], []
-    with Recorder.open(folder / "costs.rrd", "bench") as rec:
-        for k in range(n):
+            j = k % len(fr.pairs)
             t = k / FPS
-            t0 = time.perf_counter()
-            for j in range(17):
-                rec.log_arm(t + j / 500, np.full(7, 0.1), np.full(7, 0.1), np.full(7, 0.1))
             t1 = time.perf_counter()
-            rec.log_frame(k, t, small, small)      # tiny frames: this is the arm flush + metadata
-            t2 = time.perf_counter()
-            rec.log_estimate(k, t, found=True, fitness=0.8, R=np.eye(3), position_mm=[0, 0, 600.0],
-                             alpha=2.0, size_mm=model.size_mm(2.0), projection=proj)
-            rec.log_timings(t, {"capture": 1.0, "ga": 20.0, "control": 0.5, "record": 2.0, "total": 25.0})
-            t3 = time.perf_counter()
-            arm.append((t1 - t0) / 17)
-            frame.append(t2 - t1)
-            est.append(t3 - t2)
-    return {"log_arm_us": 1e6 * statistics.median(arm),
-            "arm_flush_and_frame_meta_ms": 1e3 * statistics.median(frame),
-            "log_estimate_and_timings_ms": 1e3 * statistics.median(est),
-            "points_per_camera": len(model.inner_uv) + len(model.outer_uv)}
+            for i in range(17):
+                rec.log_arm(t + i / 500, np.full(7, 0.1), np.full(7, 0.1), np.full(7, 0.01))
+            rec.log_frame(k, t, *fr.pairs[j], T_base_left=T, capture_times=(t, t + 0.001), fitness_input=fr.hues[j])
+            rec.log_estimate(k, t, found=True, fitness=0.9, R=np.eye(3), position_mm=[0, 0, 600.0], alpha=2.0,
+                             size_mm=fr.model.size_mm(2.0), generations=8, T_base_left=T, projection=fr.proj)
+            rec.log_truth(k, t, T, fr.model.size_mm(2.0))
+            rec.log_timings(t, {"hue": 10.0, "ga": 40.0, "record": 2.0}, frame=k)
+            loop.append(time.perf_counter() - t1)
+            time.sleep(max(0.0, t0 + (k + 1) / FPS - time.perf_counter()))
+    cpu = time.process_time() - c0
+    size = path.stat().st_size
+    enc = rec.encoding.encode_s if rec.encoding is not None else 0.0
+    path.unlink()
+    return {"mb_per_min": size / 1e6 / (n / FPS) * 60, "loop_ms": 1e3 * statistics.median(loop),
+            "loop_p90_ms": 1e3 * float(np.percentile(loop, 90)), "cpu_ms": 1e3 * cpu / n,
+            "encode_ms": 1e3 * enc / n}
 
 
-def rotation_stall(frames: list, folder: Path, n: int = 120) -> dict:
-    """log_frame time at a segment change (flush, footer, rename, new file) vs the median,
-    with 1 s segments of lossless frames."""
-    times = []
-    with Recorder.open(folder / "rot.rrd", "bench", segment_s=1.0) as rec:
-        for k in range(n):
-            t0 = time.perf_counter()
-            rec.log_frame(k, k / FPS, *frames[k % len(frames)])
-            times.append(time.perf_counter() - t0)
-            time.sleep(max(0.0, 1 / FPS - (time.perf_counter() - t0)))
-    at = [times[k] for k in range(1, n) if k % int(FPS) == 0]
-    return {"rotation_ms": 1e3 * statistics.median(at), "rotation_max_ms": 1e3 * max(at),
-            "other_frames_ms": 1e3 * statistics.median(times)}
+def size_table(n: int, repeats: int) -> list[dict]:
+    cfg = load_config()
+    kinds = [sim_frames(cfg, 0.0), sim_frames(cfg, 2.5), *(harbour_frames(cfg, s) for s in range(3))]
+    rows = []
+    with tempfile.TemporaryDirectory() as tmp:
+        for fr in kinds:
+            for mode, video in MODES:
+                runs = [run_once(fr, mode, video, n, Path(tmp), cfg) for _ in range(repeats)]
+                rows.append({"frames": fr.name, "mode": mode, "video": video,
+                             **{k: statistics.median(r[k] for r in runs) for k in runs[0]}})
+                print(f"  {fr.name:14s} {mode:8s} {video:5s} {rows[-1]['mb_per_min']:7.0f} MB/min", flush=True)
+        # rerun's batcher period: a chunk per entity per period, each with its ~2 KB schema
+        saved = recorder_module.BATCH_S
+        try:
+            recorder_module.BATCH_S = 0.2
+            r = run_once(kinds[0], "compact", "av1", n, Path(tmp), cfg)
+        finally:
+            recorder_module.BATCH_S = saved
+        rows.append({"frames": kinds[0].name, "mode": "compact", "video": "av1", "note": "BATCH_S=0.2", **r})
+    return rows
+
+
+def _key(f) -> tuple:
+    return (f.frame, f.status, f.found, f.fitness, f.generations, f.position_mm, f.alpha)
+
+
+def fidelity_table(duration: float, fps: float) -> list[dict]:
+    """Each mode's recording of the same lockstep session, replayed with KEYS changed."""
+    from photoservo.cli.main import main as cli
+    from photoservo.record.reader import read_recording
+    from photoservo.record.replay import load_replay, replay
+
+    rows, results = [], {}
+    with tempfile.TemporaryDirectory() as tmp:
+        for mode, video in (("full", "none"), ("compact", "av1"), ("preview", "av1")):
+            path = Path(tmp) / f"{mode}.rrd"
+            argv = ["track", "--sim", "--lockstep", "--duration", str(duration), "--seed", "3",
+                    "--set", f"sim.camera_fps={fps}", "--record", str(path),
+                    "--set", f"recording.mode='{mode}'", "--set", f"recording.video='{video}'"]
+            assert cli(argv) == 0
+            row = {"mode": mode, "video": video}
+            try:
+                t0 = time.perf_counter()
+                same = replay(load_replay(path), record=False)
+                changed = replay(load_replay(path, overrides=KEYS), record=False)
+                row["replay_s"] = time.perf_counter() - t0
+            except Exception as e:  # noqa: BLE001 - preview: refused, which is the result
+                row.update(refused=str(e))
+                rows.append(row)
+                continue
+            rec = read_recording(path)
+            recorded = [(e.frame, e.found, e.fitness, e.generations,
+                         None if e.position_mm is None else tuple(e.position_mm)) for e in rec.estimates]
+            again = [(f.frame, f.found, f.fitness, f.generations, f.position_mm) for f in same.frames]
+            results[mode] = changed
+            ref = results["full"]
+            row.update(frames=len(changed.frames), same_config_reproduces=recorded == again,
+                       identical_frames=sum(_key(a) == _key(b) for a, b in zip(changed.frames, ref.frames)),
+                       identical_commands=bool(np.array_equal(changed.commands, ref.commands)),
+                       mb=path.stat().st_size / 1e6)
+            rows.append(row)
+    return rows
 
 
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--frames", type=int, default=150)
+    ap.add_argument("--frames", type=int, default=300)
     ap.add_argument("--repeats", type=int, default=3)
+    ap.add_argument("--duration", type=float, default=3.0, help="fidelity session length (s, simulated)")
+    ap.add_argument("--fps", type=float, default=10.0, help="fidelity session camera rate")
+    ap.add_argument("--skip-fidelity", action="store_true")
     args = ap.parse_args()
-    results = []
-    with tempfile.TemporaryDirectory() as tmp:
-        for scene, sigma in (("synthetic", 0.0), ("synthetic+noise2.5", 2.5)):
-            frames = render_frames(sigma)
-            for mode in MODES:
-                runs = [run_once(frames, mode, args.frames, Path(tmp)) for _ in range(args.repeats)]
-                row = {"scene": scene, "mode": mode,
-                       **{k: statistics.median(r[k] for r in runs) for k in runs[0] if k != "exact"},
-                       "exact": all(r["exact"] for r in runs)}
-                results.append(row)
-        costs = other_costs(Path(tmp))
-        costs.update(rotation_stall(frames, Path(tmp)))
-    head = f"{'frames':20s} {'mode':9s} {'loop ms':>8s} {'total ms':>9s} {'cpu ms':>7s} {'enc ms':>7s} {'MB/min':>8s} {'read fps':>9s} exact"
-    print(f"Recording 640x480 stereo @ {FPS:.0f} fps, {args.frames} frames x {args.repeats} runs (median); "
-          f"{os.cpu_count()} CPUs, machine shared with other engineers (loaded)")
-    print(head)
-    for r in results:
-        print(f"{r['scene']:20s} {r['mode']:9s} {r['loop_ms']:8.2f} {r['total_ms']:9.2f} {r['cpu_ms']:7.2f} {r['encode_ms']:7.2f} "
-              f"{r['mb_per_min']:8.0f} {r['read_fps']:9.1f} {'yes' if r['exact'] else 'NO'}")
-    print(f"per frame besides the images: log_estimate + log_timings {costs['log_estimate_and_timings_ms']:.2f} ms "
-          f"({costs['points_per_camera']} model points per camera), 17 x log_arm "
-          f"{costs['log_arm_us']:.1f} us each + their flush with the frame metadata "
-          f"{costs['arm_flush_and_frame_meta_ms']:.2f} ms")
-    print(f"segment change (lossless, noisy frames, paced at {FPS:.0f} fps): log_frame takes "
-          f"{costs['rotation_ms']:.1f} ms (max {costs['rotation_max_ms']:.1f}) vs "
-          f"{costs['other_frames_ms']:.1f} ms otherwise")
+    load0 = os.getloadavg()[0]
+    print("size and cost per mode (running):")
+    sizes = size_table(args.frames, args.repeats)
+    fidelity = [] if args.skip_fidelity else fidelity_table(args.duration, args.fps)
+    load1 = os.getloadavg()[0]
+    print(f"\nRecording 640x480 stereo @ {FPS:.0f} fps, {args.frames} frames x {args.repeats} runs (median); "
+          f"{os.cpu_count()} CPUs shared, load average {load0:.1f} -> {load1:.1f}")
+    print(f"{'frames':15s} {'mode':8s} {'video':5s} {'MB/min':>7s} {'loop ms':>8s} {'p90':>6s} {'cpu ms':>7s} {'enc ms':>7s}")
+    for r in sizes:
+        print(f"{r['frames']:15s} {r['mode']:8s} {r['video']:5s} {r['mb_per_min']:7.0f} {r['loop_ms']:8.2f} "
+              f"{r['loop_p90_ms']:6.2f} {r['cpu_ms']:7.1f} {r['encode_ms']:7.1f}" + (f"  ({r['note']})" if "note" in r else ""))
+    if fidelity:
+        print(f"\nReplay fidelity: lockstep session {args.duration:g} s at {args.fps:g} fps, replayed with "
+              + " ".join(KEYS))
+        print(f"{'mode':8s} {'MB':>6s} {'same config = recorded':>23s} {'identical to full frames':>25s}")
+        for r in fidelity:
+            if "refused" in r:
+                print(f"{r['mode']:8s} {'':6s} refused: {r['refused']}")
+                continue
+            exact = r["identical_frames"] == r["frames"] and r["identical_commands"]
+            print(f"{r['mode']:8s} {r['mb']:6.2f} {str(r['same_config_reproduces']):>23s} "
+                  f"{r['identical_frames']:>3d}/{r['frames']} frames, commands {'equal' if r['identical_commands'] else 'DIFFER'}"
+                  + ("  BIT-EXACT" if exact else ""))
     out = Path(__file__).parent / "out" / "recording.json"
-    write_text_atomic(out, json.dumps({"fps": FPS, "size": [640, 480], "frames": args.frames,
-                                       "repeats": args.repeats, "load_note": "shared 2-core machine, loaded",
-                                       "results": results, "other_costs": costs}, indent=1) + "\n")
+    write_text_atomic(out, json.dumps({"fps": FPS, "size": [640, 480], "frames": args.frames, "repeats": args.repeats,
+                                       "load_average": [load0, load1], "keys": KEYS, "sizes": sizes,
+                                       "fidelity": fidelity}, indent=1) + "\n")
     print(f"wrote {out}")
     return 0
 

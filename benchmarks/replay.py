@@ -1,7 +1,7 @@
 """Replay speed (issue 6 item 7): stereo frames per second of `photoservo replay`.
 
-Makes one lockstep recording of the simulator (`track --sim --lockstep`, 640x480 stereo,
-lossless) and replays it `--repeats` times per config change, reporting (median of the runs):
+Makes one lockstep recording of the simulator (`track --sim --lockstep`, 640x480 stereo, the
+default [recording] mode) and replays it `--repeats` times per config change, reporting (median of the runs):
 
   load s         `load_replay`: reading the recording's setup and per-frame data (no images)
   replay fps     recorded frames / time of `replay()`'s loop: frames streamed from the file,

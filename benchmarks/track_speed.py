@@ -49,7 +49,7 @@ def prerendered(cfg, n_frames: int, record: bool) -> dict:
     tracker = Tracker.from_config(sim.scene.model, sim.rig, cfg, seed=0)
     sc = Scores()
     with tempfile.TemporaryDirectory() as d:
-        rec = Recorder.open(Path(d) / "b.rrd", "bench", mode=cfg.recording.mode) if record else None
+        rec = Recorder.from_config(cfg.recording, "bench", Path(d) / "b.rrd") if record else None
         try:
             walls = []
             for fr in frames:

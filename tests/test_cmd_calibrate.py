@@ -449,6 +449,7 @@ def test_capture_into_the_same_folder_continues_the_session(board_videos, tmp_pa
     argv = ["calibrate", "capture", "--videos", str(board_videos / "l.avi"), str(board_videos / "r.avi"),
             "--interval", "0.05", "--count", "2", "--save", str(tmp_path / "p.rrd"), "--out", str(out)]
     assert run_cli(argv, capsys)[0] == 0
+    argv[argv.index("--save") + 1] = str(tmp_path / "p2.rrd")   # a recording is never overwritten
     assert run_cli(argv, capsys)[0] == 0
     assert sorted(p.name for p in (out / "left").iterdir()) == [f"{k:04d}.png" for k in range(4)]
     names = [ln.split(",")[0] for ln in (out / "capture.csv").read_text().splitlines()[1:]]

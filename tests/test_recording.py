@@ -1,6 +1,7 @@
-"""Recordings (issue 6): frames and setup read back exactly, files complete after exceptions,
-Ctrl-C and hard kills (checked with the real `rerun rrd verify`), the comparison table against
-hand-computed numbers."""
+"""Recordings (issues 6, 12, 13): frames, planes and setup read back exactly, one file under the
+given name, complete after exceptions and Ctrl-C (checked with the real `rerun rrd verify`), read
+as far as it goes after a hard kill and reported truncated, none for a run that never started;
+the comparison table against hand-computed numbers."""
 
 from __future__ import annotations
 
@@ -17,21 +18,11 @@ import pytest
 
 from photoservo.errors import InputError
 from photoservo.geometry import make_pose
-from photoservo.record.recorder import (
-    PREVIEW_WARNING,
-    Recorder,
-    default_path,
-    rerun_cli,
-    segment_path,
-    verify_rrd,
-)
-from photoservo.record.reader import (
-    compare_runs,
-    iter_frames,
-    read_recording,
-    recording_files,
-    run_metrics,
-)
+from photoservo.record.compare import compare_runs, run_metrics
+from photoservo.record.planes import tracker_planes
+from photoservo.record.reader import describe_truncation, iter_frames, read_recording
+from photoservo.record.recorder import PREVIEW_WARNING, Recorder, default_path, rerun_cli, verify_rrd
+from photoservo.vision.fitness import stereo_hue
 from photoservo.vision.estimator import Estimate
 from photoservo.vision.photo_model import PhotoModel
 from photoservo.vision.rig import default_rig, dump_rig, parse_rig
@@ -61,21 +52,20 @@ def test_verify_cli_is_shipped():
     assert rerun_cli().is_file(), "the rerun-sdk wheel should install a `rerun` executable"
 
 
-@pytest.mark.parametrize("mode", ["lossless", "png"])
-def test_frames_and_static_setup_read_back_exactly(tmp_path: Path, mode: str):
+def test_full_frames_and_static_setup_read_back_exactly(tmp_path: Path):
     path = tmp_path / "run.rrd"
     model, rig = small_model(), default_rig()
     photo = frame_pair(99)[0]
     T = np.eye(4)
     T[:3, 3] = (1.5, -2.0, 600.0)
-    with Recorder.open(path, "track", mode=mode) as rec:
+    with Recorder.open(path, "track", mode="full") as rec:
         rec.log_static_setup(dump_rig(rig), photo, model, CONFIG_TOML, seed=1234)
         for k in range(5):
             rec.log_frame(k, 0.1 + k / 30, *frame_pair(k), T_base_left=T,
                           capture_times=(0.1 + k / 30 - 0.002, 0.1 + k / 30 - 0.001))
     assert verify_rrd(path)[0]
     r = read_recording(path, images=True)
-    assert [f.index for f in r.images] == list(range(5))
+    assert [f.index for f in r.images] == list(range(5)) and r.truncated is None
     for f in r.images:
         left, right = frame_pair(f.index)
         assert np.array_equal(f.left, left) and np.array_equal(f.right, right)
@@ -83,7 +73,8 @@ def test_frames_and_static_setup_read_back_exactly(tmp_path: Path, mode: str):
     assert np.array_equal(r.frames[2].T_base_left, T)
     assert r.frames[2].capture_times == pytest.approx((0.1 + 2 / 30 - 0.002, 0.1 + 2 / 30 - 0.001))
     s = r.setup
-    assert s.seed == 1234 and s.replayable and s.run["verb"] == "track" and s.run["mode"] == mode
+    assert s.seed == 1234 and s.replayable and s.full_frames
+    assert s.run["verb"] == "track" and s.run["mode"] == "full" and s.run["format"] == 2
     assert s.versions["rerun"].startswith("0.41")
     assert s.config_toml == CONFIG_TOML
     rig2 = parse_rig(tomllib.loads(s.rig_toml))
@@ -94,6 +85,40 @@ def test_frames_and_static_setup_read_back_exactly(tmp_path: Path, mode: str):
         a, b = getattr(s.model, name), getattr(model, name)
         assert a.dtype == b.dtype and np.array_equal(a, b), name
     assert s.model.size_px == model.size_px and s.model.origin_px == model.origin_px
+
+
+@pytest.mark.parametrize("video", ["av1", "h264", "none"])
+def test_compact_mode_keeps_the_tracker_planes_exactly_and_a_video(tmp_path: Path, video: str):
+    """Compact: per frame the planes the tracker reads (hue classes, grey near target hue)
+    exactly, given by the loop or computed from the frames; a decodable video per camera."""
+    from photoservo.config import load_config
+    from photoservo.record.planes import hue_class_lut
+    from photoservo.record.video import decode_samples
+
+    path = tmp_path / "compact.rrd"
+    model, fit = small_model(), load_config().fitness
+    with Recorder.open(path, "track", mode="compact", video=video) as rec:
+        rec.log_static_setup(dump_rig(default_rig()), None, model, CONFIG_TOML, seed=7)
+        for k in range(6):
+            hue = stereo_hue(*frame_pair(k), fit)
+            rec.log_frame(k, k / 30, *frame_pair(k), fitness_input=hue if k % 2 else None)
+    assert verify_rrd(path)[0]
+    r = read_recording(path, images=True)
+    assert not r.setup.full_frames and r.setup.replayable and r.setup.run["video"] == video
+    lut = hue_class_lut(model.inner_hue, model.target_hues, fit.hue_tolerance)
+    assert [f.index for f in r.images] == list(range(6))
+    for f in r.images:
+        want = tracker_planes(stereo_hue(*frame_pair(f.index), fit), *frame_pair(f.index), lut, model.target_hues)
+        assert f.left is None and sorted(f.planes) == sorted(want)
+        assert all(np.array_equal(f.planes[n], want[n]) for n in want)
+    if video == "none":
+        assert all(not f.video for f in r.images)
+        return
+    for side in ("left", "right"):
+        samples = [s for f in r.images for s in f.video[side]]
+        assert [s.frame for s in samples] == list(range(6)) and samples[0].keyframe
+        frames = decode_samples(video, [s.data for s in samples])
+        assert len(frames) == 6 and frames[0].shape[:2] == (64, 64)   # padded to the encoder's minimum
 
 
 def test_estimates_arm_timings_events_read_back(tmp_path: Path):
@@ -124,20 +149,41 @@ def test_estimates_arm_timings_events_read_back(tmp_path: Path):
 
 
 def test_preview_mode_says_it_cannot_be_replayed(tmp_path: Path):
+    from photoservo.record.video import decode_samples
+
     path = tmp_path / "long.rrd"
+    smooth = np.repeat(np.linspace(0, 255, W, dtype=np.uint8)[None, :, None], H, axis=0).repeat(3, axis=2)
     with pytest.warns(UserWarning, match="CANNOT be replayed"), \
             Recorder.open(path, "track", mode="preview") as rec:
-        rec.log_frame(0, 0.0, *frame_pair(0))
+        for k in range(3):
+            rec.log_frame(k, k / 30, smooth, smooth)
     r = read_recording(path, images=True)
     assert not r.setup.replayable and r.setup.warning == PREVIEW_WARNING
     assert any(PREVIEW_WARNING in text for _, _, text in r.events)
-    assert r.images[0].left.shape == (H, W, 3)     # viewable, but not equal: JPEG
-    assert not np.array_equal(r.images[0].left, frame_pair(0)[0])
+    assert all(f.left is None and f.planes is None for f in r.images)      # watched only
+    video = decode_samples("av1", [s.data for f in r.images for s in f.video["left"]])
+    assert len(video) == 3 and np.abs(video[2][:H, :W].astype(int) - smooth).mean() < 4   # lossy, close
+
+
+def test_no_file_for_a_run_that_never_started(tmp_path: Path):
+    """The setup is buffered until the first frame or arm sample: a start that fails before the
+    session leaves nothing behind."""
+    path = tmp_path / "never.rrd"
+    with pytest.raises(RuntimeError), Recorder.open(path, "track") as rec:
+        rec.log_static_setup(dump_rig(default_rig()), None, small_model(), CONFIG_TOML, seed=1)
+        rec.event(0.0, "starting")
+        raise RuntimeError("the camera did not open")
+    assert not rec.written and not path.exists() and list(tmp_path.iterdir()) == []
+    with Recorder.open(path, "move") as rec:                 # the first arm sample starts it
+        rec.event(0.0, "before the session")
+        rec.log_arm(0.0, np.zeros(7))
+    assert rec.written and verify_rrd(path)[0]
+    assert (0.0, "INFO", "before the session") in read_recording(path).events
 
 
 def test_exception_inside_the_block_leaves_a_verified_file(tmp_path: Path):
     path = tmp_path / "crash.rrd"
-    with pytest.raises(ZeroDivisionError), Recorder.open(path, "track") as rec:
+    with pytest.raises(ZeroDivisionError), Recorder.open(path, "track", mode="full") as rec:
         for k in range(4):
             rec.log_frame(k, k / 30, *frame_pair(k))
         _ = 1 / 0
@@ -148,70 +194,43 @@ def test_exception_inside_the_block_leaves_a_verified_file(tmp_path: Path):
     assert any("ZeroDivisionError" in text for _, _, text in r.events)
 
 
-def test_segments_close_cleanly_and_read_as_one(tmp_path: Path):
-    base = tmp_path / "seg.rrd"
-    with Recorder.open(base, "track", segment_s=0.1) as rec:   # 3 frames per segment at 30 fps
-        rec.log_static_setup(dump_rig(default_rig()), None, None, CONFIG_TOML, seed=9)
-        for k in range(10):
-            rec.log_frame(k, k / 30, *frame_pair(k))
-            rec.log_estimate(k, k / 30, found=True, fitness=k / 10, R=np.eye(3),
-                             position_mm=[0, 0, 500.0], alpha=2.0)
-    files = recording_files(base)
-    assert files == [segment_path(base, i) for i in (1, 2, 3, 4)] == rec.files
-    assert not base.exists()
-    from rerun.chunk import RrdReader
-    for f in files:
-        assert verify_rrd(f)[0], f
-        assert len(RrdReader(f).blueprints()) == 1     # the layout goes with every file
-        assert [e.recording_id for e in RrdReader(f).recordings()] == [rec.recording_id]
-        one = read_recording(f)                        # each segment stands alone...
-        assert one.setup.seed == 9 and one.setup.config_toml == CONFIG_TOML
-    r = read_recording(segment_path(base, 2))          # ...and any segment names the whole
-    assert r.files == files and not r.incomplete
-    assert [e.frame for e in r.estimates] == list(range(10))
-    frames = list(iter_frames(base))
-    assert [f.index for f in frames] == list(range(10))
-    assert all(np.array_equal(f.left, frame_pair(f.index)[0]) for f in frames)
-
-
 CHILD = r"""
 import sys, time
 import numpy as np
-sys.path.insert(0, sys.argv[3])
+sys.path.insert(0, sys.argv[2])
 from test_recording import frame_pair
 from photoservo.record.recorder import Recorder
-path, segment_s = sys.argv[1], float(sys.argv[2])
-with Recorder.open(path, "track", segment_s=segment_s) as rec:
+with Recorder.open(sys.argv[1], "track", mode="full") as rec:
     rec.log_static_setup(None, None, None, "[x]\n", seed={"ga": 3, "world": 4})
     k = 0
     while True:
         rec.log_frame(k, k / 30, *frame_pair(k))
-        print("frame", k, rec.segment_index, flush=True)
+        print("frame", k, flush=True)
         k += 1
-        time.sleep(0.005)
+        time.sleep(1 / 30)
 """
 
 
-def _start_child(path: Path, segment_s: float) -> subprocess.Popen:
-    return subprocess.Popen([sys.executable, "-c", CHILD, str(path), str(segment_s),
-                             str(Path(__file__).parent)], stdout=subprocess.PIPE, text=True)
+def _start_child(path: Path) -> subprocess.Popen:
+    return subprocess.Popen([sys.executable, "-c", CHILD, str(path), str(Path(__file__).parent)],
+                            stdout=subprocess.PIPE, text=True)
 
 
-def _wait_for(proc: subprocess.Popen, pred) -> None:
+def _wait_for(proc: subprocess.Popen, frames: int) -> int:
     deadline = time.monotonic() + 60
     for line in proc.stdout:
-        _, k, files = line.split()
-        if pred(int(k), int(files)):
-            return
+        k = int(line.split()[1])
+        if k >= frames:
+            return k
         assert time.monotonic() < deadline, "child too slow"
     raise AssertionError(f"child ended early with {proc.wait()}")
 
 
 def test_sigint_leaves_a_verified_file(tmp_path: Path):
     path = tmp_path / "ctrl_c.rrd"
-    proc = _start_child(path, 0.0)
+    proc = _start_child(path)
     try:
-        _wait_for(proc, lambda k, n: k >= 10)
+        _wait_for(proc, 10)
         proc.send_signal(signal.SIGINT)
         proc.communicate(timeout=60)
     finally:
@@ -226,32 +245,28 @@ def test_sigint_leaves_a_verified_file(tmp_path: Path):
     assert any("KeyboardInterrupt" in text for _, _, text in r.events)
 
 
-def test_hard_kill_leaves_verified_segments_read_as_one(tmp_path: Path):
-    base = tmp_path / "killed.rrd"
-    proc = _start_child(base, 0.2)                       # 6 frames per segment
+def test_hard_kill_leaves_the_file_readable_to_its_last_second_and_says_so(tmp_path: Path):
+    path = tmp_path / "killed.rrd"
+    proc = _start_child(path)
     try:
-        _wait_for(proc, lambda k, n: n >= 4)
-        time.sleep(0.05)
+        last = _wait_for(proc, 150)                      # >= 5 s of frames at <= 30 fps
         proc.send_signal(signal.SIGKILL)
         proc.wait(timeout=30)
     finally:
         proc.kill()
         proc.wait()
         proc.stdout.close()
-    files = recording_files(base)
-    finished = [f for f in files if not f.name.endswith(".partial.rrd")]
-    assert len(finished) >= 3 and files[:len(finished)] == finished
-    assert len(files) - len(finished) <= 2               # the tail (2 if killed mid-rotation)
-    for f in finished:                                   # every finished segment verifies
-        ok, msg = verify_rrd(f)
-        assert ok, f"{f.name}: {msg}"
-    r = read_recording(base, images=True)
-    assert set(r.incomplete) == set(files) - set(finished)
+    assert path.is_file() and list(tmp_path.iterdir()) == [path]     # one file, the given name
+    assert not verify_rrd(path)[0]                                    # no footer
+    r = read_recording(path, images=True)
+    assert r.truncated is not None and "no RRD footer" in r.truncated
     n = len(r.images)
-    assert n >= 6 * len(finished)                        # at least all finished segments
+    assert n >= last - 90                    # at most 3 s lost (BATCH_S = 1 s; the spec: 5 s)
     assert [f.index for f in r.images] == list(range(n))
     assert all(np.array_equal(f.right, frame_pair(f.index)[1]) for f in r.images)
     assert r.setup.seed == {"ga": 3, "world": 4}
+    line = describe_truncation(r)
+    assert line.startswith(f"{path}: truncated recording: no RRD footer") and f"read {len(r.frames)} frames" in line
 
 
 def _Rx(deg: float) -> np.ndarray:
@@ -318,22 +333,32 @@ def test_comparison_table_against_hand_computed_numbers(tmp_path: Path):
 def test_bad_inputs_are_one_line_errors(tmp_path: Path):
     with pytest.raises(InputError, match="mode 'tiff'"):
         Recorder.open(tmp_path / "x.rrd", "track", mode="tiff")
+    with pytest.raises(InputError, match="video 'mpeg2'"):
+        Recorder.open(tmp_path / "x.rrd", "track", video="mpeg2")
     with pytest.raises(InputError, match=r"\.rrd"):
         Recorder.open(tmp_path / "x.mp4", "track")
     with pytest.raises(InputError, match="recording not found"):
         read_recording(tmp_path / "missing.rrd")
-    seg = tmp_path / "again.rrd"
-    with Recorder.open(seg, "track", segment_s=1.0) as rec:
+    again = tmp_path / "again.rrd"
+    with Recorder.open(again, "track") as rec:
         rec.log_frame(0, 0.0, *frame_pair(0))
     with pytest.raises(InputError, match="exists already"):
-        Recorder.open(seg, "track", segment_s=1.0)
-    assert default_path("move", tmp_path).parent == tmp_path
-    assert default_path("move").name.endswith("_move.rrd")
+        Recorder.open(again, "track")
+
+
+def test_default_paths_are_new_names_in_the_logs_folder(tmp_path: Path):
+    from datetime import UTC, datetime
+    now = datetime(2026, 11, 22, 4, 37, 0, tzinfo=UTC)
+    first = default_path("move", tmp_path, now)
+    assert first == tmp_path / "20261122T043700Z_move.rrd"
+    first.write_bytes(b"taken")
+    assert default_path("move", tmp_path, now) == tmp_path / "20261122T043700Z_move_2.rrd"
+    assert default_path("move").parent == Path("logs") and default_path("move").name.endswith("_move.rrd")
 
 
 def test_live_stream_to_a_grpc_server_still_writes_the_file(tmp_path: Path):
     """`connect_url` tees to a running viewer; rerun's own gRPC server stands in for it (no
-    viewer on this machine). The file and its segments stay complete, and closing is prompt."""
+    viewer on this machine). The file stays complete, and closing is prompt."""
     import socket
     import uuid
 
@@ -343,22 +368,24 @@ def test_live_stream_to_a_grpc_server_still_writes_the_file(tmp_path: Path):
         port = s.getsockname()[1]
     server = rr.RecordingStream("viewer-stand-in", recording_id=uuid.uuid4())
     url = server.serve_grpc(grpc_port=port)
+    path = tmp_path / "live.rrd"
     try:
         t0 = time.monotonic()
-        with Recorder.open(tmp_path / "live.rrd", "track", connect_url=url, segment_s=0.1) as rec:
+        with Recorder.open(path, "track", connect_url=url, mode="full") as rec:
             for k in range(8):
                 rec.log_frame(k, k / 30, *frame_pair(k))
         assert time.monotonic() - t0 < 5.0
     finally:
         server.disconnect()
-    assert len(rec.files) == 3 and all(verify_rrd(f)[0] for f in rec.files)
-    frames = list(iter_frames(tmp_path / "live.rrd"))
+    assert verify_rrd(path)[0]
+    frames = list(iter_frames(path))
     assert [f.index for f in frames] == list(range(8))
 
 
-def test_arm_samples_from_a_control_thread_are_all_written(tmp_path: Path):
+def test_arm_samples_from_a_control_thread_are_all_written_in_degrees(tmp_path: Path):
     """`move` logs only the arm, at the control rate, from its own thread: every sample lands,
-    in order, with the arm drawn and the flange path written."""
+    in order, with the arm drawn and the flange path written. The file holds degrees (the
+    CLI's unit, what the viewer plots), the reader gives rad."""
     import threading
 
     from rerun.chunk import RrdReader
@@ -374,15 +401,19 @@ def test_arm_samples_from_a_control_thread_are_all_written(tmp_path: Path):
     assert verify_rrd(path)[0]
     r = read_recording(path)
     assert np.allclose(r.arm["q"].t, np.arange(n) * 0.002)
-    assert np.allclose(r.arm["setpoint"].values[:, 3], np.arange(n) * 2e-3)
+    assert np.allclose(r.arm["setpoint"].values[:, 3], np.arange(n) * 2e-3, rtol=1e-12, atol=1e-15)
     assert r.arm["command"].values.shape == (n, 7)
-    entities = {c.entity_path for c in RrdReader(path).stream()}
-    assert {"/world/arm/link7", "/world/arm/skeleton", "/world/flange/path"} <= entities
+    chunks = list(RrdReader(path).stream())
+    assert {"/world/arm/link7", "/world/arm/skeleton", "/world/flange/path"} <= {c.entity_path for c in chunks}
+    q_deg = np.concatenate([c.to_record_batch().column("Scalars:scalars").flatten().to_numpy()
+                            for c in chunks if c.entity_path == "/arm/q_deg" and not c.is_static])
+    assert np.allclose(np.sort(q_deg.reshape(-1, 7)[:, 0]), np.degrees(np.arange(n) * 1e-3))
 
 
 def test_projected_points_and_desired_pose_are_drawn(tmp_path: Path):
     from rerun.chunk import RrdReader
 
+    from photoservo.record.drawing import DRAW_POINTS
     from photoservo.vision.fitness import project_model
     model, rig = small_model(), default_rig()
     R, p, alpha = np.eye(3), np.array([0.0, 0.0, 400.0]), 4.0
@@ -397,18 +428,15 @@ def test_projected_points_and_desired_pose_are_drawn(tmp_path: Path):
         rec.log_estimate_of(0, 0.0, est, projection=proj)
         rec.log_desired(0.0, np.eye(4), frame=0)
     assert verify_rrd(path)[0]
-    pts, ids = {}, {}
+    pts = {}
     for c in RrdReader(path).stream():
         rb = c.to_record_batch()
         if "Points2D:positions" in rb.schema.names and not c.is_static:
             pts[c.entity_path] = np.array(rb.column("Points2D:positions")[0].values.to_pylist())
-            ids[c.entity_path] = np.array(rb.column("Points2D:class_ids")[0].values.to_pylist())
-    assert set(pts) == {"/world/rig/left/model", "/world/rig/right/model"}
-    left, right = pts["/world/rig/left/model"], ids["/world/rig/right/model"]
-    n_in = len(model.inner_uv)
-    assert np.allclose(left[:n_in], proj.inner_left[0], atol=1e-3)             # float32
-    assert np.allclose(left[n_in:], proj.outer_left[0], atol=1e-3)
-    assert (right == 0).sum() == n_in and (right == 1).sum() == len(model.outer_uv)
+    assert set(pts) == {f"/world/rig/{s}/model/{k}" for s in ("left", "right") for k in ("inner", "outer")}
+    assert len(model.inner_uv) <= DRAW_POINTS                               # all drawn
+    assert np.allclose(pts["/world/rig/left/model/inner"], proj.inner_left[0], atol=1e-3)   # float32
+    assert np.allclose(pts["/world/rig/right/model/outer"], proj.outer_right[0], atol=1e-3)
     e = read_recording(path).estimates[0]
     assert (e.found, e.fitness, e.alpha, e.generations) == (True, 0.7, alpha, 9)
     assert np.array_equal(e.size_mm, model.size_mm(alpha))
@@ -416,30 +444,32 @@ def test_projected_points_and_desired_pose_are_drawn(tmp_path: Path):
 
 def test_recording_config_section(tmp_path: Path):
     from photoservo.config import load_config
-    cfg = load_config(overrides=["recording.segment_s=0.1", f"recording.dir='{tmp_path}'"]).recording
-    assert cfg.mode == "lossless"
+    cfg = load_config(overrides=[f"recording.dir='{tmp_path}'", "recording.video='h264'"]).recording
+    assert cfg.mode == "compact" and cfg.video == "h264"
     with Recorder.from_config(cfg, "move") as rec:
         rec.log_frame(0, 0.0, *frame_pair(0))
-        rec.log_frame(1, 0.2, *frame_pair(1))
-    assert [f.parent for f in rec.files] == [tmp_path, tmp_path] and rec.files[0].name.endswith("_move.seg0001.rrd")
-    with pytest.raises(InputError, match="recording.segment_s"):
-        load_config(overrides=["recording.segment_s=-1"])
+    assert rec.path.parent == tmp_path and rec.path.name.endswith("_move.rrd") and rec.path.is_file()
+    assert read_recording(rec.path).setup.run["video"] == "h264"
+    with pytest.raises(InputError, match="recording.video"):
+        load_config(overrides=["recording.mode='preview'", "recording.video='none'"])
+    with pytest.raises(InputError, match="recording.mode"):
+        load_config(overrides=["recording.mode='lossless'"])
 
 
-def test_a_segment_cut_inside_a_message_is_read_up_to_its_last_complete_message(tmp_path: Path):
-    """What a SIGKILL during a write leaves: rerun refuses such a file outright; the reader
-    salvages every complete message before the cut."""
+def test_a_file_cut_inside_a_message_is_read_up_to_its_last_complete_message(tmp_path: Path):
+    """What a SIGKILL during a write can leave: rerun refuses such a file outright; the reader
+    salvages every complete message before the cut and says where it was cut."""
     whole = tmp_path / "whole.rrd"
-    with Recorder.open(whole, "track") as rec:
+    with Recorder.open(whole, "track", mode="full") as rec:
         rec.log_static_setup(None, None, None, CONFIG_TOML, seed=2)
         for k in range(12):
             rec.log_frame(k, k / 30, *frame_pair(k))
             rec._rec.flush()                                 # one message per frame, in order
     data = whole.read_bytes()
-    cut = segment_path(tmp_path / "cut.rrd", 1, partial=True)
+    cut = tmp_path / "cut.rrd"
     cut.write_bytes(data[: len(data) // 2 + 7])              # mid-message
-    r = read_recording(tmp_path / "cut.rrd", images=True)
-    assert r.incomplete == [cut] and r.setup.seed == 2
+    r = read_recording(cut, images=True)
+    assert "cut inside a message" in r.truncated and r.setup.seed == 2
     n = len(r.images)
     assert 3 <= n < 12 and [f.index for f in r.images] == list(range(n))
     assert all(np.array_equal(f.left, frame_pair(f.index)[0]) for f in r.images)

@@ -1,7 +1,8 @@
-"""Replay (issue 6): a recording re-run from its file alone reproduces the recorded lockstep run,
-is deterministic, writes a recording that replays again, follows config changes and recorded
-generation counts; `track --world-from` rebuilds the same simulated world; bad files are
-one-line errors."""
+"""Replay (issues 6, 12, 13): a recording re-run from its file alone reproduces the recorded
+lockstep run, is deterministic, writes a recording that replays again, follows config changes and
+recorded generation counts; a compact recording replays tracker / GA / servo changes exactly as
+the full frames do and refuses hue changes; `track --world-from` rebuilds the same simulated
+world; the path `track` prints opens as printed; truncated and bad files are one-line errors."""
 
 from __future__ import annotations
 
@@ -16,10 +17,12 @@ import pytest
 from photoservo.errors import InputError
 from photoservo.cli.main import main
 from photoservo.config import load_config
+from photoservo.record.planes import tracker_input
 from photoservo.record.recorder import Recorder, verify_rrd
 from photoservo.record.replay import load_replay, replay
 from photoservo.record.reader import iter_frames, read_recording
 from photoservo.tomlconf import dump_config
+from photoservo.vision.fitness import StereoHue
 
 SHORT = ["--sim", "--lockstep", "--duration", "1.2", "--set", "sim.camera_fps=5"]
 
@@ -56,12 +59,13 @@ def test_replay_reproduces_the_lockstep_run_and_is_deterministic(recorded: Path,
     for key in ("mean_fitness", "found_ratio", "jitter_mm", "pos_err_mm", "size_err_mm"):
         assert r1.comparison.row(key).delta == 0.0, key
     # the replay's recording is complete (verifies) and replays itself to the same result
-    assert all(verify_rrd(f)[0] for f in b.files)
+    assert verify_rrd(b.path)[0]
     assert b.setup.run["verb"] == "replay" and b.setup.seed == a.setup.seed and len(b.truth) == 6
     r3 = replay(load_replay(r1.out_path), tmp_path / "r3.rrd")
     assert r3.frames == r1.frames
-    fa, fb = next(iter_frames(recorded)), next(iter_frames(r1.out_path))
-    assert np.array_equal(fa.left, fb.left) and np.array_equal(fa.right, fb.right)
+    fa, fb = next(iter_frames(recorded)), next(iter_frames(r1.out_path))   # the same planes and video
+    assert fa.planes.keys() == fb.planes.keys() and all(np.array_equal(fa.planes[k], fb.planes[k]) for k in fa.planes)
+    assert [s.data for s in fa.video["left"]] == [s.data for s in fb.video["left"]]
 
 
 def test_changed_ga_setting_changes_the_table(recorded: Path, tmp_path: Path, capsys):
@@ -94,8 +98,9 @@ def _relog(src: Path, dst: Path, cfg_text: str, generations: int) -> None:
         s = a.setup
         rec.log_static_setup(s.rig_toml, s.photo_bgr, s.model, cfg_text, s.seed)
         for fr, m, e in zip(iter_frames(src), a.frames, a.estimates):
-            rec.log_frame(fr.index, m.t, fr.left, fr.right, T_base_left=m.T_base_left,
-                          capture_times=m.capture_times)
+            hue, left, right = tracker_input(fr.planes, StereoHue)
+            rec.log_frame(fr.index, m.t, left, right, T_base_left=m.T_base_left,
+                          capture_times=m.capture_times, fitness_input=hue, video=fr.video)
             rec.log_estimate(fr.index, m.t, found=e.found, fitness=e.fitness,
                              generations=e.generations if fr.index == 0 else generations,
                              T_base_left=m.T_base_left)
@@ -173,8 +178,8 @@ def test_bad_recordings_are_one_line_errors(recorded: Path, tmp_path: Path, caps
         rec = Recorder.open(preview, "track", mode="preview")
     with rec:
         rec.log_static_setup(a.setup.rig_toml, None, a.setup.model, a.setup.config_toml, 0)
-        fr = next(iter_frames(recorded))
-        rec.log_frame(0, 0.0, fr.left, fr.right, T_base_left=a.frames[0].T_base_left)
+        _, left, right = tracker_input(next(iter_frames(recorded)).planes, StereoHue)
+        rec.log_frame(0, 0.0, left, right, T_base_left=a.frames[0].T_base_left)
     _one_line_error(["replay", str(preview)], capsys, "preview", "cannot be replayed")
     bare = tmp_path / "bare.rrd"
     with Recorder.open(bare, "move") as rec:
@@ -187,7 +192,7 @@ def test_bad_recordings_are_one_line_errors(recorded: Path, tmp_path: Path, caps
 
 def test_hold_error_row_against_hand_computed_numbers(tmp_path: Path):
     from photoservo.geometry import make_pose
-    from photoservo.record.reader import run_metrics
+    from photoservo.record.compare import run_metrics
     from photoservo.vision.rig import Rig, default_rig, dump_rig
 
     base = default_rig()
@@ -204,3 +209,138 @@ def test_hold_error_row_against_hand_computed_numbers(tmp_path: Path):
     # rig centre (50, 0, 1000); wanted 600 mm above the truth: (50, 0, 1000) -> 0 mm,
     # (50, 30, 960) -> |(0, -30, 40)| = 50 mm; frame 2 has no truth
     assert run_metrics(read_recording(path))["hold_err_mm"] == pytest.approx(np.sqrt(2500 / 2))
+
+
+def test_track_prints_a_path_that_opens_as_printed(tmp_path: Path):
+    """A real `photoservo track` process with the default path: the `recording:` line it prints
+    names one file that `rerun rrd verify`, `rerun rrd stats` and `photoservo replay` open."""
+    import subprocess
+    import sys
+
+    from photoservo.record.recorder import rerun_cli
+
+    logs = tmp_path / "logs"
+    r = subprocess.run([sys.executable, "-m", "photoservo.cli", "track", *SHORT, "--seed", "3",
+                        "--set", f"recording.dir='{logs}'"], capture_output=True, text=True, timeout=600)
+    assert r.returncode == 0, r.stderr[-2000:]
+    printed = [ln.split("recording: ", 1)[1] for ln in r.stdout.splitlines() if ln.startswith("recording: ")]
+    assert len(printed) == 1 and Path(printed[0]).parent == logs
+    assert [p.name for p in logs.iterdir()] == [Path(printed[0]).name]
+    ok, msg = verify_rrd(printed[0])
+    assert ok, msg
+    stats = subprocess.run([str(rerun_cli()), "rrd", "stats", printed[0]], capture_output=True, text=True)
+    assert stats.returncode == 0 and "num_chunks" in stats.stdout
+    rep = subprocess.run([sys.executable, "-m", "photoservo.cli", "replay", printed[0], "--no-record"],
+                         capture_output=True, text=True, timeout=600)
+    assert rep.returncode == 0, rep.stderr[-2000:]
+    assert "recording: none (--no-record)" in rep.stdout and len(list(logs.iterdir())) == 1
+
+
+@pytest.fixture(scope="module")
+def recorded_full(tmp_path_factory) -> Path:
+    """The same lockstep run as `recorded`, with full frames."""
+    path = tmp_path_factory.mktemp("rec") / "full.rrd"
+    assert main(["track", *SHORT, "--seed", "3", "--record", str(path), "--set", "recording.mode='full'"]) == 0
+    return path
+
+
+def test_compact_replays_tracker_ga_servo_changes_exactly_as_full_frames(recorded: Path, recorded_full: Path,
+                                                                          tmp_path: Path):
+    """Issue 13's budget: the compact recording keeps what the tracker reads, so a replay with
+    other tracker, GA, estimator, fitness-weight and servo keys gives bit for bit what the full
+    frames give (acquisition with its stereo plane fit included)."""
+    from photoservo.config import load_config
+    from photoservo.record.planes import hue_class_lut, tracker_planes
+    from photoservo.vision.fitness import stereo_hue
+
+    a = read_recording(recorded)
+    fit = load_config(recorded=("r", tomllib.loads(a.setup.config_toml))).fitness
+    lut = hue_class_lut(a.setup.model.inner_hue, a.setup.model.target_hues, fit.hue_tolerance)
+    for fc, ff in zip(iter_frames(recorded), iter_frames(recorded_full)):   # the same session
+        want = tracker_planes(stereo_hue(ff.left, ff.right, fit), ff.left, ff.right, lut, a.setup.model.target_hues)
+        assert all(np.array_equal(fc.planes[k], want[k]) for k in want)
+    keys = ["ga.population=12", "tracker.generations_per_frame=3", "tracker.gain_position=0.5",
+            "estimator.min_contrast=0.6", "fitness.w_outer_mismatch=0.7", "servo.k_position=0.3"]
+    rc = replay(load_replay(recorded, overrides=keys), record=False)
+    rf = replay(load_replay(recorded_full, overrides=keys), record=False)
+    assert rc.frames == rf.frames and rc.frames[0].found
+    assert np.array_equal(rc.commands, rf.commands)
+    assert [f.fitness for f in rc.frames] != [e.fitness for e in a.estimates]   # the keys changed the run
+    # hue and photo-model keys: only the full frames can change them
+    hue = replay(load_replay(recorded_full, overrides=["fitness.hue_tolerance=3"]), record=False)
+    assert [f.fitness for f in hue.frames] != [f.fitness for f in rf.frames]
+    for key in ("fitness.hue_tolerance=3", "photo_model.interval_px=6.0", "fitness.min_value=60"):
+        with pytest.raises(InputError, match=f"{key.split('=')[0]} cannot change.*recording.mode"):
+            load_replay(recorded, overrides=[key])
+
+
+def test_truncated_recording_is_refused_unless_allow_partial(recorded: Path, tmp_path: Path, capsys):
+    """Issue 12: a recording whose writer was killed (no footer, cut inside a message) says what
+    is missing and how much was read, exit 2; --allow-partial replays what is there."""
+    data = recorded.read_bytes()
+    cut = tmp_path / "cut.rrd"
+    cut.write_bytes(data[: int(len(data) * 0.75)])
+    part = read_recording(cut)
+    n = len(part.frames)
+    assert 1 <= n < 6 and part.truncated.startswith("no RRD footer")
+    _one_line_error(["replay", str(cut), "--no-record"], capsys, "cut.rrd", "truncated recording",
+                    "no RRD footer", f"read {n} frames", "--allow-partial")
+    assert main(["replay", str(cut), "--no-record", "--allow-partial", "--json"]) == 0
+    out, err = capsys.readouterr()
+    assert json.loads(out)["frames"] <= n and "truncated recording" in err
+    _one_line_error(["track", "--sim", "--world-from", str(cut), "--no-record"], capsys, "truncated recording")
+    _one_line_error(["track", "--sim", "--allow-partial"], capsys, "--allow-partial", "--world-from")
+
+
+def test_world_from_no_record_prints_no_path(recorded: Path, capsys):
+    assert main(["track", "--sim", "--world-from", str(recorded), "--no-record", "--duration", "0.4"]) == 0
+    out = capsys.readouterr().out
+    assert "this run" in out and "recording:" not in out
+
+
+def test_sigkill_ten_seconds_into_a_twenty_second_session_leaves_a_replayable_recording(tmp_path: Path):
+    """Issue 13: a hard kill loses at most the last seconds. A real `track --sim` (real time,
+    the emulator on a pty, the renderer and control processes) is SIGKILLed 10 s into a 20 s
+    session; its one file is readable past 5 s, `replay` says it is truncated (exit 2) and
+    replays it with --allow-partial."""
+    import os
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    path = tmp_path / "killed.rrd"
+    proc = subprocess.Popen([sys.executable, "-m", "photoservo.cli", "track", "--sim", "--duration", "20",
+                             "--record", str(path), "--set", "sim.camera_fps=10.0"],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
+    try:
+        deadline = time.monotonic() + 180
+        t = 0.0
+        while t < 10.0:   # the status line: "t  10.0 s | ..." once a second without a terminal
+            line = proc.stderr.readline()
+            assert line and time.monotonic() < deadline, "track ended or stalled before 10 s"
+            if line.startswith("t "):
+                t = float(line.split()[1])
+        proc.send_signal(signal.SIGKILL)
+        proc.wait(timeout=30)
+    finally:
+        try:
+            os.killpg(proc.pid, signal.SIGKILL)   # its renderer and control processes, orphaned
+        except ProcessLookupError:
+            pass
+        proc.wait()
+        proc.stdout.close()
+        proc.stderr.close()
+    assert proc.returncode == -signal.SIGKILL
+    assert [p.name for p in tmp_path.iterdir()] == ["killed.rrd"]
+    rec = read_recording(path)
+    assert rec.truncated is not None and rec.frames and rec.frames[-1].t >= 5.0, [f.t for f in rec.frames][-3:]
+    assert rec.arm["q"].t[-1] >= 5.0
+    r = subprocess.run([sys.executable, "-m", "photoservo.cli", "replay", str(path), "--no-record"],
+                       capture_output=True, text=True, timeout=600)
+    err = r.stderr.strip().splitlines()
+    assert r.returncode == 2 and len(err) == 1 and "truncated recording" in err[0], r.stderr
+    r = subprocess.run([sys.executable, "-m", "photoservo.cli", "replay", str(path), "--no-record",
+                        "--allow-partial", "--json"], capture_output=True, text=True, timeout=900)
+    assert r.returncode == 0, r.stderr[-2000:]
+    assert json.loads(r.stdout)["frames"] == len(list(iter_frames(path))) >= 1

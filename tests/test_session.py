@@ -187,7 +187,7 @@ def test_ctrl_c_stops_the_arm_and_leaves_a_verified_recording(tmp_path):
 
     rec = tmp_path / "ctrl_c.rrd"
     proc = subprocess.Popen([sys.executable, "-m", "photoservo.cli", "track", "--sim", "--duration", "60",
-                             "--record", str(rec), "--set", "recording.segment_s=0.0", "--set", "sim.camera_fps=10.0"],
+                             "--record", str(rec), "--set", "sim.camera_fps=10.0"],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
         deadline = time.monotonic() + 90

@@ -105,8 +105,7 @@ def _open_recorder(args: argparse.Namespace, cfg):
         return None
     from photoservo.record.recorder import Recorder
 
-    rec = Recorder.open(args.record, "move", mode=cfg.recording.mode, segment_s=cfg.recording.segment_s,
-                        logs_dir=cfg.recording.dir)
+    rec = Recorder.from_config(cfg.recording, "move", args.record)
     rec.log_static_setup(None, config_toml_text=dump_config(cfg))
     return rec
 
@@ -145,6 +144,8 @@ def run(args: argparse.Namespace) -> int:
         link.close()
         if rec is not None:
             rec.close()
+            if rec.written:
+                print(f"recording: {rec.path}", file=sys.stderr)
 
 
 def _move(link: Link, motion: Motion, target: np.ndarray, rec, timeout: float) -> int:

@@ -71,6 +71,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--world-from", metavar="REC.rrd",
                    help="simulation: the world, config and seeds of a simulated recording, closed loop with "
                         "the --config/--set changes; prints the comparison with the recorded run")
+    p.add_argument("--allow-partial", action="store_true",
+                   help="with --world-from: use a truncated recording (its writer was killed) as far as it goes")
     p.add_argument("--json", action="store_true", help="print the session summary as JSON on stdout")
     add_config_options(p)
 
@@ -128,6 +130,8 @@ def run(args: argparse.Namespace) -> int:
         check_display("--view")
     if args.world_from:
         return _run_world_from(args)
+    if args.allow_partial:
+        raise InputError("--allow-partial: only with --world-from")
     args.duration = 20.0 if args.duration is None else args.duration
     args.seed = 0 if args.seed is None else args.seed
     cfg = load_config(args.config, args.overrides)
@@ -154,7 +158,7 @@ def _run_world_from(args: argparse.Namespace) -> int:
 
     if args.port or args.cameras:
         raise InputError("--world-from runs the simulator: it cannot be combined with --port or --cameras")
-    w = world_from(args.world_from, args.config, args.overrides, args.seed)
+    w = world_from(args.world_from, args.config, args.overrides, args.seed, args.allow_partial)
     if w.cfg.cameras.kind != "none":
         raise InputError("--world-from runs the simulator: config key 'cameras.kind' must be \"none\"")
     if args.duration is None:
@@ -211,7 +215,7 @@ def _report(args, sc, rec, cfg, status) -> int:
     s = sc.summary()
     if getattr(args, "temporary_record", False):
         rec = None
-    if rec is not None:
+    if rec is not None and rec.written:
         s["recording"] = _recording_files(rec)
     if args.json:
         print(dumps_strict(s))
@@ -227,20 +231,15 @@ def _report(args, sc, rec, cfg, status) -> int:
         print("median ms: " + ", ".join(f"{k} {v:.1f}" for k, v in t.items()))
         for f in s["faults"]:
             print(f"fault: {f}")
-        if rec is not None:
+        if rec is not None and rec.written:
             print(f"recording: {_recording_files(rec)}")
     return EXIT_HARDWARE if s["faults"] else 0
 
 
-def _recording_files(rec) -> str:
-    """The file(s) actually written: the path itself, or its finished segments."""
-    from photoservo.record.recorder import segment_path
-
-    if rec.segment_s <= 0:
-        return str(rec.path)
-    n = rec.segment_index
-    first = segment_path(rec.path, 1)
-    return str(first) if n <= 1 else f"{first} .. {segment_path(rec.path, n).name} ({n} segments, read as one: {rec.path})"
+def _recording_files(rec) -> str | None:
+    """The one file written (what `rerun`, `rerun rrd stats` and `photoservo replay` open), or
+    None when nothing was recorded (the session never produced a frame or arm sample)."""
+    return str(rec.path) if rec.written else None
 
 
 def _run_sim(args, cfg) -> int:
@@ -283,7 +282,7 @@ def _run_sim(args, cfg) -> int:
 def _stopped(args, rec) -> str:
     """What an interrupted session did, for its one line."""
     what = "tracking stopped" if args.no_motion else "controlled stop, servo off"
-    return what + (f"; recording: {_recording_files(rec)}" if rec is not None else "")
+    return what + (f"; recording: {_recording_files(rec)}" if rec is not None and rec.written else "")
 
 
 def _run_hardware(args, cfg) -> int:

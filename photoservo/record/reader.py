@@ -1,28 +1,23 @@
-"""Reading recordings back (issue 6, the reading side of replay) and comparing two runs.
+"""Reading recordings back (issues 6, 12 and 13): the reading side of replay.
 
-`read_recording(path)` reads a `.rrd` written by `record.recorder.Recorder` — one file, or all
-segments `<stem>.seg0001.rrd ...` of a segmented recording as one — with
+`read_recording(path)` reads a `.rrd` written by `record.recorder.Recorder` with
 `rerun.chunk.RrdReader` (rerun-sdk 0.41; `rerun.dataframe` no longer exists) into plain
 dataclasses: the static setup (rig TOML, effective config TOML, photo, PhotoModel, seed,
-versions), the per-frame metadata, estimates, ground truth, arm series, timings and events.
-`iter_frames(path)` streams the stereo images in frame order, decoded exactly as logged (PNG /
-raw are bit-exact); `read_recording(path, images=True)` loads them all (short recordings).
+versions), the per-frame metadata, estimates, ground truth, arm series (rad), timings and
+events. `iter_frames(path)` streams the frames in frame order: full frames decoded exactly as
+logged, the tracker's planes (compact mode, `record.planes`) and the video samples;
+`read_recording(path, images=True)` loads them all (short recordings).
 
-A segment without its RRD footer (the one being written when the process was killed) is read
-as far as its complete chunks go and listed in `Recording.incomplete`.
-
-`compare_runs(a, b)` builds the side-by-side table replay prints: mean fitness, found ratio,
-pose jitter, lost frames, time per frame, commanded motion and, when both runs carry the
-simulator's ground truth, position / heading / tilt / size error. Definitions at `run_metrics`.
+A recording cut short (the process that wrote it was killed, or the disk filled) lacks rerun's
+footer, and may end inside a message; it is read as far as its complete messages go, and
+`Recording.truncated` says what is missing (`describe_truncation` for a one-line report).
 """
 
 from __future__ import annotations
 
 import dataclasses
-import glob
 import io
 import json
-import math
 import re
 import tempfile
 import warnings
@@ -38,14 +33,8 @@ import pyarrow.compute as pc
 from rerun.chunk import RrdReader
 
 from photoservo.errors import InputError
+from photoservo.record import layout as L
 from photoservo.geometry import make_pose
-from photoservo.record import recorder as R_
-
-_SEG = re.compile(r"^(?P<stem>.*)\.seg(?P<n>\d{4,})(?P<partial>\.partial)?$")
-
-
-# ------------------------------------------------------------------------------------------
-# dataclasses
 
 
 @dataclass
@@ -81,6 +70,11 @@ class Setup:
     def replayable(self) -> bool:
         return bool(self.run.get("replayable", False))
 
+    @property
+    def full_frames(self) -> bool:
+        """Whether the frames' pixels were kept (full mode; format 1's lossless/png modes)."""
+        return bool(self.run.get("full_frames", self.run.get("mode") in ("lossless", "png")))
+
 
 @dataclass
 class FrameMeta:
@@ -94,12 +88,15 @@ class FrameMeta:
 
 @dataclass
 class Frame:
-    """One stereo frame read back: BGR uint8 images exactly as logged (lossless modes)."""
+    """One stereo frame read back: the full BGR frames (full mode, exactly as logged), the
+    tracker's planes (compact mode) and the video samples per side (`video.Sample`)."""
 
     index: int
     t: float
-    left: np.ndarray
-    right: np.ndarray
+    left: np.ndarray | None = None
+    right: np.ndarray | None = None
+    planes: dict[str, np.ndarray] | None = None
+    video: dict[str, list] = field(default_factory=dict)
 
 
 @dataclass
@@ -143,83 +140,82 @@ class Series:
 
 @dataclass
 class Recording:
-    files: list[Path]
-    incomplete: list[Path]
+    path: Path
+    truncated: str | None                   # what is missing when the file was cut short
     setup: Setup
     frames: list[FrameMeta]
     estimates: list[EstimateRecord]
     truth: list[TruthRecord]
-    arm: dict[str, Series]                  # "q", "setpoint", "command": (N, 7) rad
+    arm: dict[str, Series]                  # "q", "setpoint": (N, 7) rad; "command": rad/s
     timings: dict[str, Series]              # stage -> (N, 1) ms
     events: list[tuple[float, str, str]]    # (t, level, text)
     images: list[Frame] = field(default_factory=list)   # only with read_recording(images=True)
 
 
+def describe_truncation(rec: Recording) -> str:
+    """One line for a truncated recording: what is missing and what was read."""
+    ts = [f.t for f in rec.frames]
+    span = f" ({ts[0]:.2f}-{ts[-1]:.2f} s)" if ts else ""
+    q = rec.arm.get("q")
+    arm = f", arm samples to {q.t[-1]:.2f} s" if q is not None and len(q.t) else ""
+    return f"{rec.path}: truncated recording: {rec.truncated}; read {len(rec.frames)} frames{span}{arm}"
+
+
 # ------------------------------------------------------------------------------------------
-# files and chunks
-
-
-def recording_files(path: str | Path) -> list[Path]:
-    """The files of a recording: `path` itself, or its segments in order (finished
-    `.segNNNN.rrd` and the `.segNNNN.partial.rrd` tail a hard kill leaves). `path` may be the
-    base path (`x.rrd`) or any one segment (`x.seg0003.rrd`)."""
-    p = Path(path)
-    m = _SEG.match(p.stem)
-    base = p.with_name(m["stem"] + p.suffix) if m else p
-    if p.is_file() and not m:
-        return [p]
-    found = [(int(mm["n"]), s) for s in base.parent.glob(f"{glob.escape(base.stem)}.seg*{base.suffix}")
-             if (mm := _SEG.match(s.stem)) and mm["stem"] == base.stem]
-    if not found:
-        raise InputError(f"{p}: recording not found (no such file, no {base.stem}.seg*.rrd)")
-    return [s for _, s in sorted(found)]
-
-
-def _open(path: Path) -> tuple[RrdReader, bool]:
-    """(reader, complete): a file without its RRD footer was cut short (hard kill)."""
-    with warnings.catch_warnings(record=True) as caught:
-        warnings.simplefilter("always")
-        reader = RrdReader(path)
-    complete = not any("footer" in str(w.message) for w in caught)
-    return reader, complete
+# the file's chunks
 
 
 _CUT = re.compile(r"Message payload \(start (\d+), length \d+\) exceeds file size")
 _MESSAGE_HEADER = 16   # bytes before each message's payload in an RRD stream
+NO_FOOTER = "no RRD footer (the process that wrote it did not close it: killed or crashed)"
 
 
-def _file_chunks(f: Path, incomplete: list[Path]) -> Iterator[tuple[str, pa.RecordBatch]]:
-    """The chunks of one file. A file cut inside a message (a hard kill during a write) makes
-    rerun refuse the whole file; it is then read from a copy that ends at the last complete
-    message (the payload offset in rerun's error minus the 16-byte message header)."""
-    path, done, tmp = f, 0, None
-    try:
-        for _ in range(4):
-            try:
-                reader, complete = _open(path)
-                if (not complete or f.stem.endswith(".partial")) and f not in incomplete:
-                    incomplete.append(f)
-                for i, chunk in enumerate(reader.stream()):
-                    if i >= done:
-                        done += 1
-                        yield chunk.entity_path.lstrip("/"), chunk.to_record_batch()
-                return
-            except RuntimeError as e:
-                m = _CUT.search(str(e))
-                if m is None:
-                    raise
-                if f not in incomplete:
-                    incomplete.append(f)
-                if tmp is None:
-                    tmp = tempfile.TemporaryDirectory(prefix="photoservo-salvage-")
-                cut = Path(tmp.name) / f"cut{_}.rrd"
-                with open(f, "rb") as src, open(cut, "wb") as dst:
-                    _copy_prefix(src, dst, int(m.group(1)) - _MESSAGE_HEADER)
-                path = cut
-        raise RuntimeError("could not find the last complete message")
-    finally:
-        if tmp is not None:
-            tmp.cleanup()
+class _Chunks:
+    """The chunks of one recording as (entity path without the leading '/', record batch).
+
+    A file without its footer is read by rerun's whole-file scan. A file cut inside a message
+    (a kill during a write) makes rerun refuse it; it is then read from a copy that ends at the
+    last complete message (the payload offset in rerun's error minus the 16-byte message
+    header). `truncated` says which happened, after the iteration."""
+
+    def __init__(self, path: str | Path) -> None:
+        self.path = Path(path)
+        if not self.path.is_file():
+            raise InputError(f"{self.path}: recording not found")
+        self.truncated: str | None = None
+
+    def __iter__(self) -> Iterator[tuple[str, pa.RecordBatch]]:
+        path, done, tmp = self.path, 0, None
+        try:
+            for attempt in range(4):
+                try:
+                    for i, chunk in enumerate(self._stream(path)):
+                        if i >= done:
+                            done += 1
+                            yield chunk.entity_path.lstrip("/"), chunk.to_record_batch()
+                    return
+                except RuntimeError as e:
+                    m = _CUT.search(str(e))
+                    if m is None:
+                        raise
+                    size = self.path.stat().st_size
+                    self.truncated = f"{NO_FOOTER}, cut inside a message at byte {m.group(1)} of {size}"
+                    tmp = tmp or tempfile.TemporaryDirectory(prefix="photoservo-salvage-")
+                    path = Path(tmp.name) / f"cut{attempt}.rrd"
+                    with open(self.path, "rb") as src, open(path, "wb") as dst:
+                        _copy_prefix(src, dst, int(m.group(1)) - _MESSAGE_HEADER)
+            raise RuntimeError("could not find the last complete message")
+        finally:
+            if tmp is not None:
+                tmp.cleanup()
+
+    def _stream(self, path: Path) -> Iterator[Any]:
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            reader = RrdReader(path)
+        if any("footer" in str(w.message) for w in caught) and self.truncated is None:
+            self.truncated = NO_FOOTER
+        return reader.stream()
 
 
 def _copy_prefix(src: Any, dst: Any, n: int, block: int = 1 << 24) -> None:
@@ -229,18 +225,6 @@ def _copy_prefix(src: Any, dst: Any, n: int, block: int = 1 << 24) -> None:
             return
         dst.write(data)
         n -= len(data)
-
-
-def _chunks(files: list[Path], incomplete: list[Path]) -> Iterator[tuple[str, pa.RecordBatch]]:
-    """(entity path without the leading '/', record batch) of every chunk, file by file; a
-    file that cannot be read to its end is listed in `incomplete` with a warning."""
-    for f in files:
-        try:
-            yield from _file_chunks(f, incomplete)
-        except (OSError, ValueError, RuntimeError) as e:
-            if f not in incomplete:
-                incomplete.append(f)
-            warnings.warn(f"{f}: read stopped early ({e})", stacklevel=2)
 
 
 def _times(rb: pa.RecordBatch) -> tuple[np.ndarray | None, np.ndarray | None]:
@@ -278,11 +262,11 @@ def _blob(rb: pa.RecordBatch, name: str, i: int) -> bytes | None:
     return v.flatten().to_numpy(zero_copy_only=False).tobytes()
 
 
-def _packed(rb: pa.RecordBatch, layout: tuple[tuple[str, int], ...]) -> list[dict]:
-    """The `values` vectors of a data/ chunk, unpacked by `layout` (see recording.pack)."""
+def _packed(rb: pa.RecordBatch, layout: L.Layout) -> list[dict]:
+    """The `values` vectors of a data/ chunk, unpacked by `layout` (see layout.pack)."""
     width = sum(n for _, n in layout)
     flat = rb.column("values").flatten().to_numpy(zero_copy_only=False)
-    return [R_.unpack(layout, row) for row in flat.reshape(-1, width)]
+    return [L.unpack(layout, row) for row in flat.reshape(-1, width)]
 
 
 def _scalar_rows(rb: pa.RecordBatch) -> np.ndarray:
@@ -300,7 +284,7 @@ def _scalar_rows(rb: pa.RecordBatch) -> np.ndarray:
 
 def _decode_image(rb: pa.RecordBatch, i: int) -> np.ndarray:
     blob = _blob(rb, "EncodedImage:blob", i)
-    if blob is not None:
+    if blob is not None:   # format 1's png and preview modes
         img = cv2.imdecode(np.frombuffer(blob, np.uint8), cv2.IMREAD_UNCHANGED)
         if img is None:
             raise ValueError("undecodable frame in recording")
@@ -329,44 +313,77 @@ def _unpack_model(data: bytes) -> Any:
 
 
 # ------------------------------------------------------------------------------------------
-# readers
+# frames
+
+
+def _expected_parts(run: dict) -> set[str]:
+    """What each frame of a recording carries, from its setup/run: images, planes, video."""
+    if run.get("full_frames") or run.get("mode") in ("lossless", "png") or run.get("format", 1) == 1:
+        return {"image/left", "image/right"}
+    parts = {"video/left", "video/right"} if run.get("video") not in (None, "none") else set()
+    return parts | ({"planes"} if run.get("mode") == "compact" else set())
 
 
 def iter_frames(path: str | Path) -> Iterator[Frame]:
-    """Stream the stereo frames of a recording in frame order, decoded (BGR uint8).
+    """Stream the frames of a recording in frame order (`Frame`).
 
-    Left and right arrive in separate chunks; encoded pairs wait in a small buffer and are
-    decoded when complete and no earlier frame is still missing a side. A frame with only
-    one side (cut by a hard kill) is dropped at the end."""
-    pending: dict[int, dict[str, Any]] = {}
-    entities = {R_.E_IMAGE["left"]: "left", R_.E_IMAGE["right"]: "right"}
+    The parts of a frame (two images, or the planes and two video samples) arrive in separate
+    chunks; a frame waits in a small buffer until it has them all and no earlier frame is still
+    waiting. At the end of a truncated file, frames that have their images or planes are given
+    (a missing video sample then); those without are dropped."""
+    from photoservo.record.planes import decode_planes
+    from photoservo.record.video import Sample
 
-    def ready() -> Iterator[Frame]:
-        while pending:
+    pending: dict[int, Frame] = {}
+    have: dict[int, set[str]] = {}
+    expected: set[str] | None = None
+    video_codec = "av1"
+    parts = {**{L.E_IMAGE[s]: f"image/{s}" for s in L.SIDES}, **{L.E_VIDEO[s]: f"video/{s}" for s in L.SIDES},
+             L.E_PLANES: "planes"}
+
+    def ready(final: bool) -> Iterator[Frame]:
+        while pending and expected is not None:
             k = min(pending)
-            entry = pending[k]
-            if "left" not in entry or "right" not in entry:
+            done = expected <= have[k]
+            usable = {"image/left", "image/right"} <= have[k] or "planes" in have[k]
+            if not done and not final:
                 return
-            del pending[k]
-            yield Frame(k, entry["t"], _decode_image(*entry["left"]), _decode_image(*entry["right"]))
+            del have[k]
+            fr = pending.pop(k)
+            if done or usable:
+                yield fr
 
-    for ep, rb in _chunks(recording_files(path), []):
-        side = entities.get(ep)
-        if side is None:
+    for ep, rb in _Chunks(path):
+        if ep == L.E_RUN and expected is None:
+            run = json.loads(_scalar(rb, "TextDocument:text", rb.num_rows - 1))
+            expected, video_codec = _expected_parts(run), run.get("video") or "av1"
+        part = parts.get(ep)
+        if part is None or "frame" not in rb.schema.names:
             continue
         frame, t = _times(rb)
         for i in range(rb.num_rows):
-            entry = pending.setdefault(int(frame[i]), {"t": float(t[i])})
-            entry[side] = (rb, i)
-        yield from ready()
-    yield from ready()
+            k = int(frame[i])
+            fr = pending.setdefault(k, Frame(k, float(t[i])))
+            kind, _, side = part.partition("/")
+            if kind == "image":
+                setattr(fr, side, _decode_image(rb, i))
+            elif kind == "planes":
+                fr.planes = decode_planes(_blob(rb, "planes", i))
+            else:
+                key = bool(_scalar(rb, "VideoStream:is_keyframe", i))
+                fr.video.setdefault(side, []).append(Sample(k, _blob(rb, "VideoStream:sample", i), key, video_codec))
+            have.setdefault(k, set()).add(part)
+        yield from ready(False)
+    yield from ready(True)
+
+
+# ------------------------------------------------------------------------------------------
+# everything else
 
 
 def read_recording(path: str | Path, *, images: bool = False) -> Recording:
-    """Everything but the images (unless `images=True`) of a recording, as plain data."""
-    files = recording_files(path)
-    incomplete: list[Path] = []
-    run: dict = {}
+    """Everything but the frames (unless `images=True`) of a recording, as plain data."""
+    chunks = _Chunks(path)
     texts: dict[str, str] = {}
     photo = model = None
     frames: dict[int, FrameMeta] = {}
@@ -374,230 +391,73 @@ def read_recording(path: str | Path, *, images: bool = False) -> Recording:
     truth: dict[int, TruthRecord] = {}
     series: dict[str, list[tuple[np.ndarray, np.ndarray]]] = {}   # entity -> (t, values) blocks
     events: list[tuple[float, str, str]] = []
-    for ep, rb in _chunks(files, incomplete):
+    for ep, rb in chunks:
         frame, t = _times(rb)
         n = rb.num_rows
-        if ep in (R_.E_RUN, R_.E_RIG_TOML, R_.E_CONFIG, R_.E_WARNING):
-            if ep not in texts:
-                texts[ep] = _scalar(rb, "TextDocument:text", n - 1)
-        elif ep == R_.E_PHOTO and photo is None and "EncodedImage:blob" in rb.schema.names:
+        if ep in (L.E_RUN, L.E_RIG_TOML, L.E_CONFIG, L.E_WARNING):
+            texts.setdefault(ep, _scalar(rb, "TextDocument:text", n - 1))
+        elif ep == L.E_PHOTO and photo is None and "EncodedImage:blob" in rb.schema.names:
             photo = _decode_image(rb, n - 1)
-        elif ep == R_.E_MODEL and model is None:
+        elif ep == L.E_MODEL and model is None:
             model = _unpack_model(_blob(rb, "npz", n - 1))
-        elif ep == R_.E_DATA_FRAME:
-            for i, v in enumerate(_packed(rb, R_.FRAME_LAYOUT)):
+        elif ep == L.E_DATA_FRAME:
+            for i, v in enumerate(_packed(rb, L.FRAME_LAYOUT)):
                 ct, T = v["capture_times"], v["T_base_left"]
                 frames[int(frame[i])] = FrameMeta(
                     int(frame[i]), float(t[i]), None if T is None else T.reshape(4, 4),
                     None if ct is None else (float(ct[0]), float(ct[1])))
-        elif ep == R_.E_DATA_EST:
-            for i, v in enumerate(_packed(rb, R_.EST_LAYOUT)):
-                rot, T, a = v["rotation"], v["T_base_left"], v["alpha"]
-                estimates[int(frame[i])] = EstimateRecord(
-                    frame=int(frame[i]), t=float(t[i]), found=bool(v["found"][0]),
-                    fitness=None if v["fitness"] is None else float(v["fitness"][0]),
-                    generations=int(v["generations"][0]),
-                    rotation=None if rot is None else rot.reshape(3, 3),
-                    position_mm=v["position_mm"], alpha=None if a is None else float(a[0]),
-                    size_mm=v["size_mm"], T_base_left=None if T is None else T.reshape(4, 4))
-        elif ep == R_.E_DATA_TRUTH:
-            for i, v in enumerate(_packed(rb, R_.TRUTH_LAYOUT)):
+        elif ep == L.E_DATA_EST:
+            for i, v in enumerate(_packed(rb, L.EST_LAYOUT)):
+                estimates[int(frame[i])] = _estimate(int(frame[i]), float(t[i]), v)
+        elif ep == L.E_DATA_TRUTH:
+            for i, v in enumerate(_packed(rb, L.TRUTH_LAYOUT)):
                 truth[int(frame[i])] = TruthRecord(int(frame[i]), float(t[i]),
                                                    v["T_base_target"].reshape(4, 4), v["size_mm"])
-        elif ep == R_.E_EVENTS:
+        elif ep == L.E_EVENTS:
             for i in range(n):
                 events.append((float(t[i]), _scalar(rb, "TextLog:level", i) or "",
                                _scalar(rb, "TextLog:text", i)))
-        elif ep.startswith(("arm/", "timing/")) and t is not None \
-                and "Scalars:scalars" in rb.schema.names:
+        elif ep.startswith(("arm/", "timing/")) and t is not None and "Scalars:scalars" in rb.schema.names:
             series.setdefault(ep, []).append((t, _scalar_rows(rb)))
-    if R_.E_RUN not in texts:
-        why = "cut short before its setup was written" if incomplete else f"no {R_.E_RUN}"
-        raise InputError(f"{files[0]}: not a readable photoservo recording ({why})")
-
-    def to_series(blocks: list[tuple[np.ndarray, np.ndarray]]) -> Series:
-        t = np.concatenate([b[0] for b in blocks])
-        v = np.concatenate([b[1] for b in blocks])
-        order = np.argsort(t, kind="stable")
-        return Series(t[order], v[order])
-
-    arm = {k.split("/", 1)[1]: to_series(v) for k, v in series.items() if k.startswith("arm/")}
-    timings = {k.split("/", 1)[1].removesuffix("_ms"): to_series(v)
-               for k, v in series.items() if k.startswith("timing/")}
-    run = json.loads(texts[R_.E_RUN])
-    setup = Setup(run, texts.get(R_.E_RIG_TOML), texts.get(R_.E_CONFIG), photo, model,
-                  texts.get(R_.E_WARNING))
-    rec = Recording(files, incomplete, setup, [frames[k] for k in sorted(frames)],
+    if L.E_RUN not in texts:
+        why = "cut short before its setup was written" if chunks.truncated else f"no {L.E_RUN}"
+        raise InputError(f"{chunks.path}: not a readable photoservo recording ({why})")
+    run = json.loads(texts[L.E_RUN])
+    setup = Setup(run, texts.get(L.E_RIG_TOML), texts.get(L.E_CONFIG), photo, model, texts.get(L.E_WARNING))
+    rec = Recording(chunks.path, chunks.truncated, setup, [frames[k] for k in sorted(frames)],
                     [estimates[k] for k in sorted(estimates)], [truth[k] for k in sorted(truth)],
-                    arm, timings, sorted(events, key=lambda e: e[0]))
+                    _arm(series), _timings(series), sorted(events, key=lambda e: e[0]))
     if images:
         rec.images = list(iter_frames(path))
     return rec
 
 
-# ------------------------------------------------------------------------------------------
-# comparing two runs
+def _estimate(frame: int, t: float, v: dict) -> EstimateRecord:
+    rot, T, a = v["rotation"], v["T_base_left"], v["alpha"]
+    return EstimateRecord(frame=frame, t=t, found=bool(v["found"][0]),
+                          fitness=None if v["fitness"] is None else float(v["fitness"][0]),
+                          generations=int(v["generations"][0]),
+                          rotation=None if rot is None else rot.reshape(3, 3),
+                          position_mm=v["position_mm"], alpha=None if a is None else float(a[0]),
+                          size_mm=v["size_mm"], T_base_left=None if T is None else T.reshape(4, 4))
 
 
-def _heading_tilt(T: np.ndarray) -> tuple[float, float]:
-    """Heading: direction of the model x axis in the base xy plane (rad). Tilt: angle of the
-    model z axis from the base vertical (rad, 0..pi/2, sign of z ignored)."""
-    x, z = T[:3, 0], T[:3, 2]
-    return math.atan2(x[1], x[0]), math.acos(min(1.0, abs(float(z[2]) / np.linalg.norm(z))))
+def _to_series(blocks: list[tuple[np.ndarray, np.ndarray]], scale: float = 1.0) -> Series:
+    t = np.concatenate([b[0] for b in blocks])
+    v = np.concatenate([b[1] for b in blocks])
+    order = np.argsort(t, kind="stable")
+    return Series(t[order], v[order] * scale if scale != 1.0 else v[order])
 
 
-def _wrap(a: float) -> float:
-    return (a + math.pi) % (2 * math.pi) - math.pi
-
-
-def run_metrics(rec: Recording) -> dict[str, float]:
-    """Per-run numbers of the comparison table (NaN when a run lacks the data):
-
-    frames            frames logged
-    mean_fitness      mean fitness over all estimates that have one
-    found_ratio       estimates with found / estimates
-    lost_frames       estimates with found = false
-    jitter_mm         RMS of the second difference |p[k+1] - 2 p[k] + p[k-1]| of the estimated
-                      position (base frame when the camera pose was logged) over consecutive
-                      found frames: shake that a constant-velocity drift does not contribute
-    ms_per_frame      (t_last - t_first) / (frames - 1) * 1000 on the loop clock
-    tracker_ms        mean hue + mean GA time per frame (timing/hue_ms, timing/ga_ms): the
-                      processing cost, which a replay changes while its frame times do not
-    commanded_rad     joint-space path length of the commands, sum_k ||c[k] - c[k-1]||_2
-    pos_err_mm        RMS ||p_est - p_true|| (base frame) over found frames with truth
-    heading_err_deg   RMS heading difference (model x axis in the base xy plane, wrapped)
-    tilt_err_deg      RMS difference of tilt (model z axis from the vertical)
-    size_err_mm       RMS over found frames of the mean |size_est - size_true| of the 2 sides
-    hold_err_mm       servo: RMS over frames with truth and a camera pose of the distance from
-                      the rig's centre (midpoint of the optical centres, from T_base_left and the
-                      recorded rig) to where the servo law wants it, [servo] hover_mm straight
-                      above the TRUE target; all frames, the approach included
-    """
-    nan = float("nan")
-    est = rec.estimates
-    found = [e for e in est if e.found and e.T_base_model() is not None]
-    m: dict[str, float] = {"frames": float(len(rec.frames))}
-    fits = [e.fitness for e in est if e.fitness is not None]
-    m["mean_fitness"] = float(np.mean(fits)) if fits else nan
-    m["found_ratio"] = len([e for e in est if e.found]) / len(est) if est else nan
-    m["lost_frames"] = float(len([e for e in est if not e.found])) if est else nan
-    d2 = []
-    for a, b, c in zip(found, found[1:], found[2:]):
-        if b.frame == a.frame + 1 and c.frame == b.frame + 1:
-            pa_, pb, pc = (e.T_base_model()[:3, 3] for e in (a, b, c))
-            d2.append(float(np.linalg.norm(pc - 2 * pb + pa_)))
-    m["jitter_mm"] = float(np.sqrt(np.mean(np.square(d2)))) if d2 else nan
-    ts = [f.t for f in rec.frames]
-    m["ms_per_frame"] = (ts[-1] - ts[0]) / (len(ts) - 1) * 1000 if len(ts) > 1 else nan
-    if "hue" in rec.timings and "ga" in rec.timings:
-        m["tracker_ms"] = float(np.mean(rec.timings["hue"].values) + np.mean(rec.timings["ga"].values))
-    else:
-        m["tracker_ms"] = nan
-    cmd = rec.arm.get("command")
-    m["commanded_rad"] = (float(np.linalg.norm(np.diff(cmd.values, axis=0), axis=1).sum())
-                          if cmd is not None and len(cmd.t) > 1 else nan)
-    truth = {tr.frame: tr for tr in rec.truth}
-    pos, head, tilt, size = [], [], [], []
-    for e in found:
-        tr = truth.get(e.frame)
-        if tr is None:
-            continue
-        Te, Tt = e.T_base_model(), tr.T_base_target
-        pos.append(float(np.linalg.norm(Te[:3, 3] - Tt[:3, 3])))
-        (he, te), (ht, tt) = _heading_tilt(Te), _heading_tilt(Tt)
-        head.append(_wrap(he - ht))
-        tilt.append(te - tt)
-        if e.size_mm is not None and tr.size_mm is not None:
-            size.append(float(np.mean(np.abs(e.size_mm - tr.size_mm))))
-
-    def rms(v: list[float], scale: float = 1.0) -> float:
-        return float(np.sqrt(np.mean(np.square(v)))) * scale if v else nan
-    m["pos_err_mm"] = rms(pos)
-    m["heading_err_deg"] = rms(head, 180 / math.pi)
-    m["tilt_err_deg"] = rms(tilt, 180 / math.pi)
-    m["size_err_mm"] = rms(size)
-    m["hold_err_mm"] = rms(_hold_errors(rec, truth))
-    return m
-
-
-def _hold_errors(rec: Recording, truth: dict[int, TruthRecord]) -> list[float]:
-    """Per frame |rig centre - (true target + hover_mm up)| (mm), see run_metrics."""
-    import tomllib
-    try:
-        rig = rec.setup.rig()
-        hover = float(tomllib.loads(rec.setup.config_toml or "")["servo"]["hover_mm"])
-    except (KeyError, TypeError, ValueError, InputError):
-        return []
-    if rig is None:
-        return []
-    from photoservo.servo.session import left_centre
-    centre = left_centre(rig)
-    out = []
-    for f in rec.frames:
-        tr = truth.get(f.index)
-        if tr is None or f.T_base_left is None:
-            continue
-        c = f.T_base_left[:3, :3] @ centre + f.T_base_left[:3, 3]
-        out.append(float(np.linalg.norm(c - tr.T_base_target[:3, 3] - np.array([0.0, 0.0, hover]))))
+def _arm(series: dict[str, list]) -> dict[str, Series]:
+    """The arm series in rad (rad/s), from degrees (format 2) or rad (format 1)."""
+    out = {}
+    for entity, (key, scale) in {**L.E_ARM, **L.E_ARM_V1}.items():
+        if entity in series:
+            out[key] = _to_series(series[entity], scale)
     return out
 
 
-METRICS: tuple[tuple[str, str, str], ...] = (
-    ("frames", "frames", "{:.0f}"),
-    ("mean_fitness", "mean fitness", "{:.4f}"),
-    ("found_ratio", "found ratio", "{:.3f}"),
-    ("lost_frames", "lost frames", "{:.0f}"),
-    ("jitter_mm", "pose jitter (mm)", "{:.2f}"),
-    ("ms_per_frame", "time per frame (ms)", "{:.1f}"),
-    ("tracker_ms", "tracker ms per frame", "{:.1f}"),
-    ("commanded_rad", "commanded motion (rad)", "{:.3f}"),
-    ("pos_err_mm", "position error (mm RMS)", "{:.2f}"),
-    ("heading_err_deg", "heading error (deg RMS)", "{:.2f}"),
-    ("tilt_err_deg", "tilt error (deg RMS)", "{:.2f}"),
-    ("size_err_mm", "size error (mm RMS)", "{:.2f}"),
-    ("hold_err_mm", "hold error vs truth (mm RMS)", "{:.1f}"),
-)
-
-
-@dataclass
-class ComparisonRow:
-    key: str
-    label: str
-    a: float
-    b: float
-
-    @property
-    def delta(self) -> float:
-        return self.b - self.a
-
-
-@dataclass
-class Comparison:
-    """Side-by-side numbers of two runs; `str()` is the table replay prints."""
-
-    name_a: str
-    name_b: str
-    rows: list[ComparisonRow]
-
-    def row(self, key: str) -> ComparisonRow:
-        return next(r for r in self.rows if r.key == key)
-
-    def __str__(self) -> str:
-        fmt = {k: f for k, _, f in METRICS}
-
-        def cell(v: float, key: str) -> str:
-            return "-" if math.isnan(v) else fmt[key].format(v)
-        head = ("", self.name_a, self.name_b, "B - A")
-        body = [(r.label, cell(r.a, r.key), cell(r.b, r.key), cell(r.delta, r.key)) for r in self.rows]
-        w = [max(len(x[i]) for x in [head, *body]) for i in range(4)]
-        line = lambda x: "  ".join([x[0].ljust(w[0])] + [x[i].rjust(w[i]) for i in (1, 2, 3)])
-        return "\n".join([line(head), "  ".join("-" * n for n in w), *map(line, body)])
-
-
-def compare_runs(a: Recording | str | Path, b: Recording | str | Path, name_a: str = "A",
-                 name_b: str = "B") -> Comparison:
-    """The comparison table of two runs (replay vs recorded, or two closed-loop runs), given
-    as recordings read or as paths. Truth rows are NaN ('-') unless the runs carry truth."""
-    a, b = (r if isinstance(r, Recording) else read_recording(r) for r in (a, b))
-    ma, mb = run_metrics(a), run_metrics(b)
-    return Comparison(name_a, name_b, [ComparisonRow(k, lbl, ma[k], mb[k]) for k, lbl, _ in METRICS])
+def _timings(series: dict[str, list]) -> dict[str, Series]:
+    return {k.split("/", 1)[1].removesuffix("_ms"): _to_series(v)
+            for k, v in series.items() if k.startswith("timing/")}

@@ -6,8 +6,9 @@ Replay (`replay`), from the file alone:
   * setup: the recorded rig (TOML), the photo-model (bit-exact arrays), the tracker seed and the
     effective config; the config replay runs with is defaults <- recorded <- --config <- --set
     (`load_replay`).
-  * vision: every recorded stereo frame (read back exactly: lossless/PNG recordings only; a
-    preview-mode JPEG recording is refused) goes through a fresh `vision.tracker.Tracker` with
+  * vision: every recorded stereo frame (read back exactly: a full recording's pixels, or a
+    compact recording's planes — the hue classes and grey the tracker reads, `record.planes`;
+    a preview recording is refused) goes through a fresh `vision.tracker.Tracker` with
     the recorded seed, at its recorded capture time and left-camera pose T_base_left, with no
     time budget. Generation counts: a lockstep recording (config sim.lockstep = true) ran the
     fixed [tracker] generations_per_frame, and so does its replay. A real-time run stopped
@@ -23,9 +24,15 @@ Replay (`replay`), from the file alone:
     logged as arm/setpoint and arm/command (setpoint.dq, as the session logs it) beside the
     recorded q. The arm does not move: servo gains change the commands, not the frames, so
     tune gains closed loop with `track --sim --world-from REC`.
+  * keys: a compact recording replays any tracker, GA, estimator, fitness-weight and servo key
+    exactly as the full frames would; photo_model.* and the hue keys (`planes.HUE_KEYS`)
+    change what the tracker reads, so only a full recording lets them change (the photo-model
+    is then rebuilt from the recorded photo). A truncated recording (its writer was killed)
+    is refused with what is missing and how much was read, unless `allow_partial`.
   * output: a complete recording (static setup with the replay's effective config and the
-    same seed, every frame again, estimates, truth copied, arm series, timings, events) that
-    can itself be replayed, and the side-by-side table (`reader.compare_runs`).
+    same seed, every frame again, estimates, truth copied, arm series, timings, events; a
+    compact recording's video copied) that can itself be replayed, and the side-by-side table
+    (`compare.compare_runs`); `record=False` keeps no recording.
 
 World from a recording (`world_from`): a simulated recording's effective config (its [sim]
 section: seed, target motion, cameras) and tracker seed rebuilt, the user's --config/--set on
@@ -36,9 +43,9 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import sys
 import time
 import tomllib
-import warnings
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -48,14 +55,8 @@ import numpy as np
 
 from photoservo.errors import InputError
 from photoservo.config import Config, load_config
-from photoservo.record.reader import (
-    Comparison,
-    Frame,
-    Recording,
-    compare_runs,
-    iter_frames,
-    read_recording,
-)
+from photoservo.record.compare import Comparison, compare_runs
+from photoservo.record.reader import Frame, Recording, describe_truncation, iter_frames, read_recording
 from photoservo.tomlconf import dump_config
 
 # ------------------------------------------------------------------------------------------
@@ -86,29 +87,31 @@ class ReplaySetup:
         return f"fixed {n} generations per tracking frame (no time budget)"
 
 
-def _read(p: Path) -> tuple[Recording, list]:
-    """`read_recording` with a one-line InputError for a missing or unreadable file; also the
-    warnings it raised (a cut-short file says why)."""
-    with warnings.catch_warnings(record=True) as caught:
-        warnings.simplefilter("always")
-        try:
-            return read_recording(p), list(caught)
-        except InputError:
-            raise
-        except (OSError, ValueError, RuntimeError) as e:
-            raise InputError(f"{p}: not a readable recording ({_first_line(e)})") from None
+def _read(p: Path, allow_partial: bool) -> Recording:
+    """`read_recording` with one-line InputErrors: a missing or unreadable file, and a
+    truncated one (what is missing, how much was read) unless `allow_partial`, when that line
+    is a warning on stderr instead."""
+    try:
+        rec = read_recording(p)
+    except InputError:
+        raise
+    except (OSError, ValueError, RuntimeError) as e:
+        raise InputError(f"{p}: not a readable recording ({_first_line(e)})") from None
+    if rec.truncated is not None:
+        if not allow_partial:
+            raise InputError(describe_truncation(rec) + "; --allow-partial uses what is there")
+        print(f"warning: {describe_truncation(rec)}; using what is there (--allow-partial)", file=sys.stderr)
+    return rec
 
 
-def read_checked(path: str | Path) -> Recording:
-    """`read_recording` with one-line errors: a missing, unreadable or non-photoservo file is an
-    InputError; a preview-mode (lossy JPEG) recording cannot be replayed."""
+def read_checked(path: str | Path, allow_partial: bool = False) -> Recording:
+    """`read_recording` with one-line errors: a missing, unreadable, truncated (unless
+    `allow_partial`) or non-photoservo file is an InputError; a preview-mode (video only)
+    recording cannot be replayed."""
     p = Path(path)
-    rec, caught = _read(p)
-    if rec.incomplete and not rec.frames:
-        why = _first_line(caught[0].message) if caught else "cut short"
-        raise InputError(f"{p}: not a readable recording ({why})")
+    rec = _read(p, allow_partial)
     if not rec.setup.replayable:
-        raise InputError(f"{p}: a preview-mode recording (lossy JPEG frames, hue changed) cannot be replayed")
+        raise InputError(f"{p}: a preview recording (a lossy video of the frames) cannot be replayed")
     return rec
 
 
@@ -128,6 +131,7 @@ def recorded_config(rec: Recording, path: str | Path, config_path: str | Path | 
         table = tomllib.loads(text)
     except tomllib.TOMLDecodeError as e:
         raise InputError(f"{path}: the recorded config is not valid TOML ({e})") from None
+    table.pop("recording", None)   # how the run was recorded is not how the replay records
     where = f"{path} (recorded config)"
     return load_config(recorded=(where, table)), load_config(config_path, overrides, recorded=(where, table))
 
@@ -141,10 +145,12 @@ def tracker_seed(rec: Recording) -> int:
 
 
 def load_replay(path: str | Path, config_path: str | Path | None = None, overrides: Sequence[str] = (),
-                fixed_generations: bool = False) -> ReplaySetup:
-    """Read a recording and rebuild rig, photo-model, config and seed for `replay`."""
+                fixed_generations: bool = False, allow_partial: bool = False) -> ReplaySetup:
+    """Read a recording and rebuild rig, photo-model, config and seed for `replay`. Changed
+    photo-model keys rebuild the model from the recorded photo; they and the hue keys need a
+    recording with full frames (`record.planes`)."""
     p = Path(path)
-    rec = read_checked(p)
+    rec = read_checked(p, allow_partial)
     rec_cfg, cfg = recorded_config(rec, p, config_path, overrides)
     rig = rec.setup.rig()
     if rig is None or rig.T_flange_left() is None:
@@ -153,10 +159,32 @@ def load_replay(path: str | Path, config_path: str | Path | None = None, overrid
         raise InputError(f"{p}: the recording has no photo-model: nothing to replay")
     if not rec.frames:
         raise InputError(f"{p}: the recording holds no frames")
+    changed = _changed_frame_keys(rec_cfg, cfg)
+    if changed and not rec.setup.full_frames:
+        raise InputError(f"{p}: a {rec.setup.run.get('mode')} recording keeps the tracker's hue classes, not the "
+                         f"frames: {', '.join(changed)} cannot change (record with recording.mode=\"full\")")
+    if not rec.setup.full_frames and cfg.recording.mode == "full":
+        raise InputError(f"{p}: a {rec.setup.run.get('mode')} recording has no full frames to write: "
+                         "recording.mode cannot be \"full\" for its replay")
+    model = rec.setup.model
+    if cfg.photo_model != rec_cfg.photo_model:
+        from photoservo.vision.photo_model import build_photo_model
+        model = build_photo_model(rec.setup.photo_bgr, cfg.photo_model)
     budgeted = not rec_cfg.sim.lockstep
     same_n = cfg.tracker.generations_per_frame == rec_cfg.tracker.generations_per_frame
-    return ReplaySetup(p, rec, rec_cfg, cfg, rig, rec.setup.model, rec.setup.photo_bgr, tracker_seed(rec),
+    return ReplaySetup(p, rec, rec_cfg, cfg, rig, model, rec.setup.photo_bgr, tracker_seed(rec),
                        recorded_generations=budgeted and same_n and not fixed_generations)
+
+
+def _changed_frame_keys(a: Config, b: Config) -> list[str]:
+    """The photo-model and hue keys (`planes.HUE_KEYS`) that differ between two configs."""
+    from photoservo.record.planes import HUE_KEYS
+    keys = [f"photo_model.{f.name}" for f in dataclasses.fields(a.photo_model)] + list(HUE_KEYS)
+
+    def value(cfg: Config, key: str) -> Any:
+        section, name = key.split(".")
+        return getattr(getattr(cfg, section), name)
+    return [k for k in keys if value(a, k) != value(b, k)]
 
 
 # ------------------------------------------------------------------------------------------
@@ -179,7 +207,7 @@ class FrameResult:
 @dataclass
 class ReplayResult:
     setup: ReplaySetup
-    out_path: Path
+    out_path: Path | None         # the replay's recording (None: not kept, `record=False`)
     frames: list[FrameResult]
     commands: np.ndarray          # (N, 7) open-loop setpoint.dq at the logged control ticks
     seconds: float                # wall time of the replay (tracker + control + recording)
@@ -236,11 +264,44 @@ def _available(m: Any, latency: float, busy: dict[int, float]) -> float:
     return t_l + latency + busy.get(m.index, 0.0)
 
 
+class _CopiedVideo:
+    """The replay's recorder, logging each frame's recorded video samples (set in `samples`)
+    instead of encoding the frames it is given (a compact recording's frames are its grey
+    planes, not the pictures)."""
+
+    def __init__(self, recorder: Any) -> None:
+        self.recorder, self.samples = recorder, None
+
+    def __getattr__(self, name: str) -> Any:
+        return getattr(self.recorder, name)
+
+    def log_frame(self, *args: Any, **kwargs: Any) -> None:
+        self.recorder.log_frame(*args, video=self.samples, **kwargs)
+
+
+def _tracker_frame(fr: Frame, path: Path) -> tuple[np.ndarray, np.ndarray, Any]:
+    """(left BGR, right BGR, fitness input or None) of a recorded frame: the full frames, or
+    the compact planes (`record.planes.tracker_input`)."""
+    if fr.left is not None and fr.right is not None:
+        return fr.left, fr.right, None
+    from photoservo.record.planes import tracker_input
+    from photoservo.vision.fitness import StereoHue
+    try:
+        hue, left, right = tracker_input(fr.planes or {}, StereoHue)
+    except KeyError as e:
+        raise InputError(f"{path}: frame {fr.index} lacks the {e.args[0]} (recorded by an older "
+                         "photoservo): it cannot be replayed") from None
+    return left, right, hue
+
+
 def replay(setup: ReplaySetup, out: str | Path | None = None, *, view: bool = False,
-           progress: Callable[[int, int], None] | None = None) -> ReplayResult:
+           progress: Callable[[int, int], None] | None = None, record: bool = True) -> ReplayResult:
     """Re-run the tracker on every recorded frame and the control law open loop on the recorded
     joint states (module docstring); write the new recording to `out` (None: the [recording]
-    default path) and compare it with the recorded run."""
+    default path; `record=False`: a temporary file, deleted after the comparison) and compare
+    it with the recorded run."""
+    import tempfile
+
     from photoservo.robot import pa10
     from photoservo.servo import session as S
     from photoservo.servo.motion import Motion
@@ -264,7 +325,10 @@ def replay(setup: ReplaySetup, out: str | Path | None = None, *, view: bool = Fa
     sc = S.Scores()
     results: list[FrameResult] = []
     commands: list[np.ndarray] = []
-    recorder = Recorder.from_config(cfg.recording, "replay", out, view=view)
+    tmp = None if record else tempfile.TemporaryDirectory(prefix="photoservo-replay-")
+    if tmp is not None:
+        out = Path(tmp.name) / "replay.rrd"
+    recorder = _CopiedVideo(Recorder.from_config(cfg.recording, "replay", out, view=view))
     t_start = time.perf_counter()
     try:
         recorder.log_static_setup(dump_rig(rig), setup.photo, setup.model, dump_config(cfg),
@@ -284,8 +348,10 @@ def replay(setup: ReplaySetup, out: str | Path | None = None, *, view: bool = Fa
                 n_rec = rec_gens.get(fr.index)
                 capped = (setup.recorded_generations and n_rec is not None
                           and 1 <= n_rec < cfg.tracker.generations_per_frame)   # (acquiring frames ignore it)
-                sfr = S.Frame(fr.index, t_l, t_r, t_l + latency, fr.left, fr.right, m.T_base_left)
-                track = S._vision_step(sfr, tracker, cfg, sc, recorder, None, n_rec if capped else None)
+                left, right, hue = _tracker_frame(fr, setup.path)
+                recorder.samples = None if setup.recording.setup.full_frames else fr.video
+                sfr = S.Frame(fr.index, t_l, t_r, t_l + latency, left, right, m.T_base_left)
+                track = S._vision_step(sfr, tracker, cfg, sc, recorder, None, n_rec if capped else None, hue=hue)
                 tr = truth.get(fr.index)
                 if tr is not None:
                     recorder.log_truth(fr.index, t_l, tr.T_base_target,
@@ -324,10 +390,13 @@ def replay(setup: ReplaySetup, out: str | Path | None = None, *, view: bool = Fa
     finally:
         recorder.close()
     seconds = time.perf_counter() - t_start
-    out_path = recorder.path
-    result = ReplayResult(setup, out_path, results, np.array(commands).reshape(-1, 7), seconds,
-                          events=list(ctrl.events))
-    result.comparison = compare_runs(rec, read_recording(out_path), "recorded", "replay")
+    try:
+        result = ReplayResult(setup, recorder.path if record else None, results,
+                              np.array(commands).reshape(-1, 7), seconds, events=list(ctrl.events))
+        result.comparison = compare_runs(rec, read_recording(recorder.path), "recorded", "replay")
+    finally:
+        if tmp is not None:
+            tmp.cleanup()
     return result
 
 
@@ -348,11 +417,12 @@ class WorldFrom:
 
 
 def world_from(path: str | Path, config_path: str | Path | None = None, overrides: Sequence[str] = (),
-               seed: int | None = None) -> WorldFrom:
+               seed: int | None = None, allow_partial: bool = False) -> WorldFrom:
     """Rebuild the simulated world of a recording: its effective config (the [sim] section:
-    seed, target motion, camera timing) with --config/--set on top, and its tracker seed."""
+    seed, target motion, camera timing) with --config/--set on top, and its tracker seed. A
+    truncated recording is an InputError unless `allow_partial`."""
     p = Path(path)
-    rec, _ = _read(p)
+    rec = _read(p, allow_partial)
     if not rec.truth:
         raise InputError(f"{p}: not a simulated recording (no ground truth): --world-from needs one")
     rec_cfg, cfg = recorded_config(rec, p, config_path, overrides)

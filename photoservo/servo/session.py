@@ -43,7 +43,7 @@ from photoservo.servo.control import (
 )
 from photoservo.servo.motion import Motion, Setpoint
 from photoservo.sim.world import LockstepArm, SimScene, TargetMotion, sim_hand_eye
-from photoservo.vision.fitness import project_model, stereo_hue
+from photoservo.vision.fitness import StereoHue, project_model, stereo_hue
 from photoservo.vision.rig import Rig
 from photoservo.sim.renderer import synthetic_rig
 from photoservo.vision.tracker import Track, Tracker
@@ -328,10 +328,12 @@ def run_lockstep(cfg: Config, duration_s: float, *, collect: bool = False, no_mo
 
 
 def _vision_step(fr: Frame, tracker: Tracker, cfg: Config, sc: Scores, recorder, scene: SimScene | None,
-                 max_generations: int | None = None) -> Track:
-    """One frame through the tracker, timed and recorded (`max_generations`: Tracker.update)."""
+                 max_generations: int | None = None, hue: StereoHue | None = None) -> Track:
+    """One frame through the tracker, timed and recorded (`max_generations`: Tracker.update).
+    `hue`: the fitness input when it is known already (a replay of a compact recording);
+    computed from the frame otherwise."""
     c0 = time.perf_counter()
-    hue = stereo_hue(fr.left, fr.right, cfg.fitness)
+    hue = stereo_hue(fr.left, fr.right, cfg.fitness) if hue is None else hue
     c1 = time.perf_counter()
     track = tracker.update(hue, fr.left, fr.right, fr.T_base_left, fr.t_left, max_generations)
     c2 = time.perf_counter()
@@ -342,7 +344,7 @@ def _vision_step(fr: Frame, tracker: Tracker, cfg: Config, sc: Scores, recorder,
     if recorder is not None:
         c3 = time.perf_counter()
         recorder.log_frame(fr.index, fr.t_left, fr.left, fr.right, T_base_left=fr.T_base_left,
-                           capture_times=(fr.t_left, fr.t_right))
+                           capture_times=(fr.t_left, fr.t_right), fitness_input=hue)
         proj = None
         if track.R_left is not None:
             proj = project_model(track.R_left[None], track.t_left[None], np.array([track.alpha_measured]),

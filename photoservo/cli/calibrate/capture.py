@@ -71,7 +71,7 @@ def run_capture(args: argparse.Namespace) -> int:
         print("press Enter to save a pair, q + Enter to finish")
     with source:  # opens, or fails here: a failed start leaves no recording
         pass
-    rec = Recorder.open(args.save, "calibrate", mode="lossless", view=args.spawn, connect_url=args.connect)
+    rec = Recorder.open(args.save, "calibrate", mode="full", view=args.spawn, connect_url=args.connect)
     try:
         with source:
             for w in source.warnings:

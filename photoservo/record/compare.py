@@ -1,0 +1,185 @@
+"""Comparing two runs (issue 6): the side-by-side table `photoservo replay` and
+`track --world-from` print — mean fitness, found ratio, pose jitter, lost frames, time per
+frame, commanded motion and, when both runs carry the simulator's ground truth, position /
+heading / tilt / size / hold error. Definitions at `run_metrics`.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from photoservo.errors import InputError
+from photoservo.record.reader import EstimateRecord, Recording, TruthRecord, read_recording
+
+
+def _heading_tilt(T: np.ndarray) -> tuple[float, float]:
+    """Heading: direction of the model x axis in the base xy plane (rad). Tilt: angle of the
+    model z axis from the base vertical (rad, 0..pi/2, sign of z ignored)."""
+    x, z = T[:3, 0], T[:3, 2]
+    return math.atan2(x[1], x[0]), math.acos(min(1.0, abs(float(z[2]) / np.linalg.norm(z))))
+
+
+def _wrap(a: float) -> float:
+    return (a + math.pi) % (2 * math.pi) - math.pi
+
+
+def run_metrics(rec: Recording) -> dict[str, float]:
+    """Per-run numbers of the comparison table (NaN when a run lacks the data):
+
+    frames            frames logged
+    mean_fitness      mean fitness over all estimates that have one
+    found_ratio       estimates with found / estimates
+    lost_frames       estimates with found = false
+    jitter_mm         RMS of the second difference |p[k+1] - 2 p[k] + p[k-1]| of the estimated
+                      position (base frame when the camera pose was logged) over consecutive
+                      found frames: shake that a constant-velocity drift does not contribute
+    ms_per_frame      (t_last - t_first) / (frames - 1) * 1000 on the loop clock
+    tracker_ms        mean hue + mean GA time per frame (timing/hue_ms, timing/ga_ms): the
+                      processing cost, which a replay changes while its frame times do not
+    commanded_rad     joint-space path length of the commands, sum_k ||c[k] - c[k-1]||_2
+    pos_err_mm        RMS ||p_est - p_true|| (base frame) over found frames with truth
+    heading_err_deg   RMS heading difference (model x axis in the base xy plane, wrapped)
+    tilt_err_deg      RMS difference of tilt (model z axis from the vertical)
+    size_err_mm       RMS over found frames of the mean |size_est - size_true| of the 2 sides
+    hold_err_mm       servo: RMS over frames with truth and a camera pose of the distance from
+                      the rig's centre (midpoint of the optical centres, from T_base_left and the
+                      recorded rig) to where the servo law wants it, [servo] hover_mm straight
+                      above the TRUE target; all frames, the approach included
+    """
+    nan = float("nan")
+    est = rec.estimates
+    found = [e for e in est if e.found and e.T_base_model() is not None]
+    m: dict[str, float] = {"frames": float(len(rec.frames))}
+    fits = [e.fitness for e in est if e.fitness is not None]
+    m["mean_fitness"] = float(np.mean(fits)) if fits else nan
+    m["found_ratio"] = len([e for e in est if e.found]) / len(est) if est else nan
+    m["lost_frames"] = float(len([e for e in est if not e.found])) if est else nan
+    d2 = []
+    for a, b, c in zip(found, found[1:], found[2:]):
+        if b.frame == a.frame + 1 and c.frame == b.frame + 1:
+            pa_, pb, pc = (e.T_base_model()[:3, 3] for e in (a, b, c))
+            d2.append(float(np.linalg.norm(pc - 2 * pb + pa_)))
+    m["jitter_mm"] = float(np.sqrt(np.mean(np.square(d2)))) if d2 else nan
+    ts = [f.t for f in rec.frames]
+    m["ms_per_frame"] = (ts[-1] - ts[0]) / (len(ts) - 1) * 1000 if len(ts) > 1 else nan
+    if "hue" in rec.timings and "ga" in rec.timings:
+        m["tracker_ms"] = float(np.mean(rec.timings["hue"].values) + np.mean(rec.timings["ga"].values))
+    else:
+        m["tracker_ms"] = nan
+    cmd = rec.arm.get("command")
+    m["commanded_rad"] = (float(np.linalg.norm(np.diff(cmd.values, axis=0), axis=1).sum())
+                          if cmd is not None and len(cmd.t) > 1 else nan)
+    truth = {tr.frame: tr for tr in rec.truth}
+    m.update(_truth_errors(found, truth))
+    m["hold_err_mm"] = _rms(_hold_errors(rec, truth))
+    return m
+
+
+def _rms(v: list[float], scale: float = 1.0) -> float:
+    return float(np.sqrt(np.mean(np.square(v)))) * scale if v else float("nan")
+
+
+def _truth_errors(found: list[EstimateRecord], truth: dict[int, TruthRecord]) -> dict[str, float]:
+    """RMS position, heading, tilt and size errors of found estimates against the truth (see
+    `run_metrics`)."""
+    pos, head, tilt, size = [], [], [], []
+    for e in found:
+        tr = truth.get(e.frame)
+        if tr is None:
+            continue
+        Te, Tt = e.T_base_model(), tr.T_base_target
+        pos.append(float(np.linalg.norm(Te[:3, 3] - Tt[:3, 3])))
+        (he, te), (ht, tt) = _heading_tilt(Te), _heading_tilt(Tt)
+        head.append(_wrap(he - ht))
+        tilt.append(te - tt)
+        if e.size_mm is not None and tr.size_mm is not None:
+            size.append(float(np.mean(np.abs(e.size_mm - tr.size_mm))))
+    return {"pos_err_mm": _rms(pos), "heading_err_deg": _rms(head, 180 / math.pi),
+            "tilt_err_deg": _rms(tilt, 180 / math.pi), "size_err_mm": _rms(size)}
+
+
+def _hold_errors(rec: Recording, truth: dict[int, TruthRecord]) -> list[float]:
+    """Per frame |rig centre - (true target + hover_mm up)| (mm), see run_metrics."""
+    import tomllib
+    try:
+        rig = rec.setup.rig()
+        hover = float(tomllib.loads(rec.setup.config_toml or "")["servo"]["hover_mm"])
+    except (KeyError, TypeError, ValueError, InputError):
+        return []
+    if rig is None:
+        return []
+    from photoservo.servo.session import left_centre
+    centre = left_centre(rig)
+    out = []
+    for f in rec.frames:
+        tr = truth.get(f.index)
+        if tr is None or f.T_base_left is None:
+            continue
+        c = f.T_base_left[:3, :3] @ centre + f.T_base_left[:3, 3]
+        out.append(float(np.linalg.norm(c - tr.T_base_target[:3, 3] - np.array([0.0, 0.0, hover]))))
+    return out
+
+
+METRICS: tuple[tuple[str, str, str], ...] = (
+    ("frames", "frames", "{:.0f}"),
+    ("mean_fitness", "mean fitness", "{:.4f}"),
+    ("found_ratio", "found ratio", "{:.3f}"),
+    ("lost_frames", "lost frames", "{:.0f}"),
+    ("jitter_mm", "pose jitter (mm)", "{:.2f}"),
+    ("ms_per_frame", "time per frame (ms)", "{:.1f}"),
+    ("tracker_ms", "tracker ms per frame", "{:.1f}"),
+    ("commanded_rad", "commanded motion (rad)", "{:.3f}"),
+    ("pos_err_mm", "position error (mm RMS)", "{:.2f}"),
+    ("heading_err_deg", "heading error (deg RMS)", "{:.2f}"),
+    ("tilt_err_deg", "tilt error (deg RMS)", "{:.2f}"),
+    ("size_err_mm", "size error (mm RMS)", "{:.2f}"),
+    ("hold_err_mm", "hold error vs truth (mm RMS)", "{:.1f}"),
+)
+
+
+@dataclass
+class ComparisonRow:
+    key: str
+    label: str
+    a: float
+    b: float
+
+    @property
+    def delta(self) -> float:
+        return self.b - self.a
+
+
+@dataclass
+class Comparison:
+    """Side-by-side numbers of two runs; `str()` is the table replay prints."""
+
+    name_a: str
+    name_b: str
+    rows: list[ComparisonRow]
+
+    def row(self, key: str) -> ComparisonRow:
+        return next(r for r in self.rows if r.key == key)
+
+    def __str__(self) -> str:
+        fmt = {k: f for k, _, f in METRICS}
+
+        def cell(v: float, key: str) -> str:
+            return "-" if math.isnan(v) else fmt[key].format(v)
+        head = ("", self.name_a, self.name_b, "B - A")
+        body = [(r.label, cell(r.a, r.key), cell(r.b, r.key), cell(r.delta, r.key)) for r in self.rows]
+        w = [max(len(x[i]) for x in [head, *body]) for i in range(4)]
+        line = lambda x: "  ".join([x[0].ljust(w[0])] + [x[i].rjust(w[i]) for i in (1, 2, 3)])
+        return "\n".join([line(head), "  ".join("-" * n for n in w), *map(line, body)])
+
+
+def compare_runs(a: Recording | str | Path, b: Recording | str | Path, name_a: str = "A",
+                 name_b: str = "B") -> Comparison:
+    """The comparison table of two runs (replay vs recorded, or two closed-loop runs), given
+    as recordings read or as paths. Truth rows are NaN ('-') unless the runs carry truth."""
+    a, b = (r if isinstance(r, Recording) else read_recording(r) for r in (a, b))
+    ma, mb = run_metrics(a), run_metrics(b)
+    return Comparison(name_a, name_b, [ComparisonRow(k, lbl, ma[k], mb[k]) for k, lbl, _ in METRICS])
