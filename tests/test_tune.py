@@ -14,7 +14,8 @@ import pytest
 from photoservo.cli.main import main
 from photoservo.config import load_config
 from photoservo.errors import InputError
-from photoservo.record.reader import read_recording, run_metrics
+from photoservo.record.compare import run_metrics
+from photoservo.record.reader import read_recording
 from photoservo.tune.objectives import Sources, recording_scores, replay_scores, session_scores, world_overrides
 from photoservo.tune.space import build_space, load_space_file, overlay_toml, parse_space_arg
 

@@ -1,13 +1,13 @@
 """What a tuning trial measures (issue 14): one configuration run on simulated worlds (closed
 loop, lockstep: servo, tracker and GA keys all act) and/or replayed recordings (open loop through
-`record.replay`: tracker, GA and photo-model keys act; the arm's path is the recorded one), scored
+`record.replay`: tracker and GA keys act, photo-model keys on full recordings; the arm's path is the recorded one), scored
 with the session's own numbers. Every score is "lower is better":
 
   hold   hold error (mm RMS): the rig centre against the desired pose over the TRUE target,
          after settling (the lockstep session's `Scores`, what `track --json` prints as
          rms_position_error_mm); closed loop only: a replay does not move the arm
   track  track error (mm RMS): estimated target position against the truth, found frames
-         (`record.reader.run_metrics` pos_err_mm of the run's recording)
+         (`record.compare.run_metrics` pos_err_mm of the run's recording)
   lost   share of frames whose estimate was not found (0..1)
   cpu    tracker time per frame (ms): hue + GA, mean over frames (wall time of the loop's
          vision step; on a loaded machine it carries the load)
@@ -124,7 +124,8 @@ def recording_scores(metrics: dict[str, float]) -> dict[str, float]:
 
 def _lockstep(cfg: Config, duration_s: float, seed: int, settle_s: float, need_track: bool) -> dict[str, float]:
     """One closed-loop lockstep run -> scores (recorded to a temporary file for track error)."""
-    from photoservo.record.reader import read_recording, run_metrics
+    from photoservo.record.compare import run_metrics
+    from photoservo.record.reader import read_recording
 
     try:   # issue 11 moves the simulator harness from servo/session.py to sim/run.py
         from photoservo.sim.run import build_sim, run_lockstep
