@@ -49,7 +49,7 @@ FPS = 30.0
 DISTINCT = 45   # distinct stereo frames per kind (1.5 s), cycled
 MODES = (("compact", "av1"), ("compact", "h264"), ("compact", "none"), ("full", "none"), ("preview", "av1"))
 KEYS = ["ga.population=12", "tracker.generations_per_frame=3", "tracker.gain_position=0.5",
-        "estimator.threshold=0.5", "fitness.w_outer_mismatch=0.7", "servo.k_position=0.3"]
+        "estimator.min_contrast=0.6", "fitness.w_outer_mismatch=0.7", "servo.k_position=0.3"]
 
 
 class Frames:
