@@ -34,7 +34,7 @@ def test_signal_during_move_is_a_controlled_stop(tmp_path, sig):
     rrd = tmp_path / "move.rrd"
     target = np.degrees(HOME_Q) + [60.0, 0, 0, 0, 0, 0, 0]  # ~3 s at 50 % speed
     p = subprocess.Popen([PY, "-m", "photoservo.cli", "move", "--port", emu.path, "--joints", *map(str, target),
-                          "--speed", "50", "--record", str(rrd), "--set", "recording.segment_s=0.0"],
+                          "--speed", "50", "--record", str(rrd)],
                          stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
         assert _wait(lambda: emu.true_state().status & P.Status.MOVING, 60.0), "never started moving"
@@ -69,7 +69,7 @@ def test_sigterm_to_the_process_group_during_track_sim(tmp_path):
     the recording verifies."""
     rec = tmp_path / "term.rrd"
     proc = subprocess.Popen([PY, "-m", "photoservo.cli", "track", "--sim", "--duration", "60",
-                             "--record", str(rec), "--set", "recording.segment_s=0.0",
+                             "--record", str(rec),
                              "--set", "sim.camera_fps=10.0",
                              # a busy shared machine must not end the session before the signal does
                              "--set", "link.silence_timeout_s=2.0", "--set", "emulator.watchdog_periods=50",

@@ -145,7 +145,7 @@ def run(args: argparse.Namespace) -> int:
         if rec is not None:
             rec.close()
             if rec.written:
-                print(f"recording: {rec.path}", file=sys.stderr)
+                print(f"recording: {rec.path}")   # stdout: stderr keeps its one line
 
 
 def _move(link: Link, motion: Motion, target: np.ndarray, rec, timeout: float) -> int:
