@@ -151,7 +151,7 @@ def test_json_outputs_are_strict(capsys):
     def strict(text: str):
         return json.loads(text, parse_constant=lambda c: (_ for _ in ()).throw(ValueError(c)))
 
-    rc = main(["estimate", *STEREO, "--json", "--set", "estimator.threshold=10.0"])  # nothing can pass
+    rc = main(["estimate", *STEREO, "--json", "--set", "estimator.min_contrast=1.5"])  # contrast <= 1: nothing can pass
     out = capsys.readouterr().out
     assert rc == 1
     js = strict(out)
