@@ -22,7 +22,7 @@ from photoservo.record.planes import (
     tracker_planes,
 )
 from photoservo.config import load_config
-from photoservo.vision.estimator import target_blobs
+from photoservo.vision.seeding import target_blobs
 from photoservo.vision.fitness import StereoHue, counts_compiled, counts_reference
 from photoservo.vision.photo_model import HUE_BINS, NO_HUE, PhotoModel
 from photoservo.vision.rig import default_rig
