@@ -120,3 +120,18 @@ def test_the_container_keeps_any_field_of_the_fitness_input():
     del planes["fitness/saturation_left"]
     with pytest.raises(KeyError, match="saturation_left"):
         tracker_input(planes, Wider)
+
+
+def test_a_frame_the_estimator_seeds_from_the_hue_layout_keeps_its_raw_hues():
+    """vision/hue_layout.py reads hue values (soft bins), not only the class tests: a frame with
+    more than estimator.layout_share of its hued pixels in target hues is kept unreduced."""
+    from photoservo.record.planes import frame_lut
+
+    model = _model(np.random.default_rng(4), 3)
+    lut = hue_class_lut(model.inner_hue, model.target_hues, 10)
+    water = np.full((H, W), int(np.flatnonzero(~model.target_hues)[0]), np.uint8)
+    assert frame_lut(lut, water, model.target_hues, 0.3) is lut
+    many = water.copy()
+    many[: H // 2] = int(np.flatnonzero(model.target_hues)[0])
+    assert frame_lut(lut, many, model.target_hues, 0.3) is None
+    assert frame_lut(lut, many, model.target_hues, 0.6) is lut

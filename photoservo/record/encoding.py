@@ -60,6 +60,7 @@ class FrameEncoding:
         self.hue_lut: np.ndarray | None = None       # compact: hue -> class (`planes`)
         self.target_hues: np.ndarray | None = None
         self.fitness: Any = None                     # [fitness] params of the recorded config
+        self.layout_share = 0.0                      # [estimator] layout_share of the recorded config
         self.encoders: dict[str, Any] = {}
         self.codec: dict[str, str] = {}              # side -> codec of the logged stream
         self.frame_t: dict[tuple[str, int], float] = {}   # (side, frame) -> t, until its sample
@@ -114,9 +115,10 @@ class FrameEncoding:
 
     def _encode_planes(self, frame: int, t: float, fitness_input: Any, left: np.ndarray,
                        right: np.ndarray) -> None:
-        from photoservo.record.planes import encode_planes, tracker_planes
+        from photoservo.record.planes import encode_planes, frame_lut, tracker_planes
         t0 = time.perf_counter()
-        blob = encode_planes(tracker_planes(fitness_input, left, right, self.hue_lut, self.target_hues))
+        lut = frame_lut(self.hue_lut, fitness_input.left, self.target_hues, self.layout_share)
+        blob = encode_planes(tracker_planes(fitness_input, left, right, lut, self.target_hues))
         self.encode_s += time.perf_counter() - t0
         self.rec._log(L.E_PLANES, t, frame, rr.AnyValues(planes=L.blob(blob)))
 

@@ -12,7 +12,9 @@ give it the camera frames. Per stereo frame the tracker reads:
     smallest hue. The fitness, the estimator's seeding blobs, detection and the plane fit's
     target mask read only those tests, so they compute the same numbers on the classes as on
     the hues; water, whose hues are far from the creature's, becomes one value and compresses
-    to almost nothing (a 640x480 hue plane: ~105 KB as PNG, its classes ~5 KB).
+    to almost nothing (a 640x480 hue plane: ~105 KB as PNG, its classes ~5 KB). A frame on
+    which the estimator would seed from the hue layout (target hues on more than
+    estimator.layout_share of the hued pixels: `frame_lut`) keeps its raw hues.
   * grey patches for the stereo plane fit at acquisition (`vision.stereo_plane`, tilt from the
     disparity gradient): left patches (+-4 px, bilinear) around inner points that land on
     target-hue pixels, right patches along their lines of sight (+-8 % depth, +-3 px of
@@ -40,8 +42,9 @@ import numpy as np
 
 from photoservo.vision.photo_model import HUE_BINS, hue_distance
 
-#: [fitness] keys the hue planes depend on; with photo_model.* they need full frames to change.
-HUE_KEYS = ("fitness.hue_tolerance", "fitness.min_saturation", "fitness.min_value")
+#: Keys the hue planes depend on; with photo_model.* they need full frames to change.
+#: estimator.layout_share decides which frames keep their raw hues (`frame_lut`).
+HUE_KEYS = ("fitness.hue_tolerance", "fitness.min_saturation", "fitness.min_value", "estimator.layout_share")
 HUE_FIELDS = ("left", "right")          # the hue planes of the fitness input (StereoHue)
 GREY_RADIUS_PX = {"left": 6, "right": 32}
 FITNESS, GREY = "fitness/", "grey/"     # plane-name prefixes
@@ -65,6 +68,17 @@ def hue_class_lut(inner_hue: np.ndarray, target_hues: np.ndarray, hue_tolerance:
     for v in range(HUE_BINS):
         lut[v] = first.setdefault(np.packbits(tests[v]).tobytes(), v)
     return lut
+
+
+def frame_lut(lut: np.ndarray | None, hue_left: np.ndarray, target_hues: np.ndarray | None,
+              layout_share: float) -> np.ndarray | None:
+    """The class map for one frame, or None (keep the raw hues) when the estimator would seed
+    from the hue layout (`vision/hue_layout.py`, more than `layout_share` of the left image's
+    hued pixels in target hues): that path reads hue values, not only the class tests."""
+    if lut is None or target_hues is None:
+        return lut
+    hued = hue_left[hue_left < HUE_BINS]
+    return None if len(hued) and float(np.mean(np.asarray(target_hues, bool)[hued])) > layout_share else lut
 
 
 def target_mask(hue: np.ndarray, target_hues: np.ndarray) -> np.ndarray:

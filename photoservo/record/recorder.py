@@ -342,7 +342,9 @@ class Recorder:
         if config_toml_text is not None:
             self._log_static(L.E_CONFIG, rr.TextDocument(config_toml_text))
             if self.encoding is not None:
-                self.encoding.fitness = _fitness_params(config_toml_text)
+                cfg = _recorded_config(config_toml_text)
+                self.encoding.fitness = None if cfg is None else cfg.fitness
+                self.encoding.layout_share = 0.0 if cfg is None else cfg.estimator.layout_share
         if photo_bgr is not None:
             self.draw.photo(photo_bgr)
         if model is not None:
@@ -474,11 +476,11 @@ def _bgr(img: np.ndarray) -> np.ndarray:
     return np.asarray(img)
 
 
-def _fitness_params(config_toml_text: str) -> Any:
-    """The [fitness] params of a recorded effective config (defaults for missing keys), or
-    None when it is not a valid photoservo config."""
+def _recorded_config(config_toml_text: str) -> Any:
+    """The recorded effective config (defaults for missing keys), or None when it is not a
+    valid photoservo config."""
     from photoservo.config import load_config
     try:
-        return load_config(recorded=("recorded config", tomllib.loads(config_toml_text))).fitness
+        return load_config(recorded=("recorded config", tomllib.loads(config_toml_text)))
     except (InputError, tomllib.TOMLDecodeError):
         return None
