@@ -1,6 +1,6 @@
 """Accuracy of `estimate` from the DEFAULT search volume (issue 2 item 9, "accuracy").
 
-Scenes (sim/renderer.random_scene, seeded): squid / crab / fish in turn at 300-1500 mm depth,
+Scenes (sim/scenes.random_scene, seeded): squid / crab / fish in turn at 300-1500 mm depth,
 random heading, tilt up to 40 deg, every effect on (waves, glints, sensor noise, blur, brightness,
 per-camera white balance, JPEG/MJPG chroma loss, bending, foam occlusion) and the written rig off
 from the rendering rig by a calibration error (0.1 deg stereo rotation, 0.5 % focal length).
@@ -59,7 +59,7 @@ from photoservo.vision.ga import paper_params
 from photoservo.vision.photo_model import build_photo_model
 from photoservo.geometry import heading_tilt_error
 from photoservo.sim import harbour
-from photoservo.sim.renderer import EFFECTS, random_scene
+from photoservo.sim.scenes import EFFECTS, random_scene
 
 KINDS = ("squid", "crab", "fish")
 SUCCESS_POS_FRAC = 0.05

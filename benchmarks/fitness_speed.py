@@ -3,7 +3,7 @@ whole population, with a photo-model of exactly 1000 sampling points (fixed, so 
 sampling cannot buy speed), at 30 individuals (the paper's population) and 100, beside the
 paper's 0.213 s per generation.
 
-Scene: a seeded synthetic squid scene (sim/renderer.random_scene) at 600 mm, its photo-model
+Scene: a seeded synthetic squid scene (sim/scenes.random_scene) at 600 mm, its photo-model
 resampled to exactly 1000 points (inner and outer in their natural proportion). Population:
 the truth with Gaussian spread (40 mm, ~15 deg, x1.3 in alpha), like a GA mid-run.
 Two rigs: the synthetic rig as written (lens distortion: the kernel's general path) and the
@@ -50,7 +50,7 @@ from photoservo.vision.fitness import (
 )
 from photoservo.vision.photo_model import PhotoModel, build_photo_model
 from photoservo.vision.rig import Camera, Rig
-from photoservo.sim.renderer import random_scene
+from photoservo.sim.scenes import random_scene
 
 PAPER_S = 0.213  # the paper's seconds per generation (30 individuals, 68-bit GA)
 N_POINTS = 1000
@@ -103,7 +103,7 @@ t1 = time.perf_counter()
 from photoservo.config import load_config
 from photoservo.vision.fitness import fitness, StereoHue
 from photoservo.vision.photo_model import PhotoModel
-from photoservo.sim.renderer import synthetic_rig
+from photoservo.sim.scenes import synthetic_rig
 p = load_config().fitness
 m = PhotoModel(inner_uv=np.zeros((3, 2)), inner_hue=np.zeros(3, np.uint8), outer_uv=np.ones((3, 2)),
                target_hues=np.zeros(180, bool), size_px=(1.0, 1.0), origin_px=(0.0, 0.0),

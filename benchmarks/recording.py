@@ -95,7 +95,7 @@ def harbour_frames(cfg, seed: int) -> Frames:
 
 
 def run_once(fr: Frames, mode: str, video: str, n: int, folder: Path, cfg) -> dict:
-    from photoservo.sim.renderer import synthetic_rig
+    from photoservo.sim.scenes import synthetic_rig
     from photoservo.tomlconf import dump_config
     from photoservo.vision.rig import dump_rig
 

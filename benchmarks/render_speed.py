@@ -33,7 +33,8 @@ from photoservo.fileio import write_text_atomic
 from photoservo.config import load_config
 from photoservo.sim.world import SIM_WATER_STRIDE, SimScene
 from photoservo.vision.photo_model import NO_HUE, hue_image
-from photoservo.sim.renderer import CameraEffects, make_transform, synthetic_rig
+from photoservo.sim.renderer import CameraEffects, make_transform
+from photoservo.sim.scenes import synthetic_rig
 
 OUT = Path(__file__).parent / "out" / "render_speed.json"
 

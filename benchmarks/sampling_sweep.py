@@ -11,7 +11,7 @@ seeded synthetic scenes are estimated from the default search volume and we repo
   size %          median |alpha_true / alpha_est - 1|
   wall s          median wall seconds of `estimate` (loaded shared machine)
 
-Scenes: sim/renderer.random_scene, squid / crab / fish in turn, 300-1500 mm, random heading
+Scenes: sim/scenes.random_scene, squid / crab / fish in turn, 300-1500 mm, random heading
 and tilt up to 40 deg, effects waves, glints, noise, blur, white balance, chroma loss and bend;
 odd scenes give the estimator another individual's photo. Every interval sees the same scenes,
 so accuracy is compared in pairs against the finest interval: per scene, this interval's error
@@ -42,7 +42,7 @@ from photoservo.vision.estimator import estimate
 from photoservo.vision.fitness import fitness, stereo_hue
 from photoservo.vision.photo_model import build_photo_model
 from photoservo.geometry import heading_tilt_error
-from photoservo.sim.renderer import random_scene
+from photoservo.sim.scenes import random_scene
 
 KINDS = ("squid", "crab", "fish")
 EFFECTS = ("waves", "glints", "noise", "blur", "white-balance", "chroma", "bend")

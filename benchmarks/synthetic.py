@@ -37,13 +37,8 @@ from photoservo.config import load_config
 from photoservo.vision.photo_model import build_photo_model
 from photoservo.vision.rig import project_points
 from photoservo.sim.specimens import SPECIES, specimen
-from photoservo.sim.renderer import (
-    DEFAULT_EFFECTS,
-    EFFECTS,
-    StereoRenderer,
-    random_scene,
-    render_stereo,
-)
+from photoservo.sim.renderer import StereoRenderer, render_stereo
+from photoservo.sim.scenes import DEFAULT_EFFECTS, EFFECTS, random_scene
 
 MARKS_UV = np.array([[0.0, 0.0], [-45.0, -18.0], [45.0, -18.0], [45.0, 18.0], [-45.0, 18.0]])
 

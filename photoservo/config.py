@@ -28,7 +28,7 @@ from photoservo.sim.world import SimParams
 from photoservo.vision.fitness import FitnessParams
 from photoservo.vision.photo_model import PhotoModelParams
 from photoservo.vision.sources import CamerasParams
-from photoservo.sim.renderer import SynthParams
+from photoservo.sim.scenes import SynthParams
 from photoservo.vision.tracker import TrackerParams
 
 

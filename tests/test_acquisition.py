@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from photoservo.config import load_config
-from photoservo.sim.renderer import random_scene
+from photoservo.sim.scenes import random_scene
 from photoservo.vision.estimator import estimate
 from photoservo.vision.fitness import stereo_hue
 from photoservo.vision.photo_model import build_photo_model

@@ -11,7 +11,7 @@ from photoservo.fileio import write_image_atomic
 from photoservo.cli.main import main
 from photoservo.config import load_config
 from photoservo.vision.rig import save_rig
-from photoservo.sim.renderer import random_scene
+from photoservo.sim.scenes import random_scene
 
 DESIGN_KEYS = {"found", "position_mm", "rotation", "alpha_px_per_mm", "size_mm", "fitness", "generations", "seconds"}
 

@@ -16,7 +16,7 @@ from photoservo.vision.seeding import blob_pairs
 from photoservo.vision.fitness import stereo_hue
 from photoservo.vision.photo_model import build_photo_model
 from photoservo.geometry import heading_tilt_error, rotation_from_heading_tilt
-from photoservo.sim.renderer import random_scene
+from photoservo.sim.scenes import random_scene
 
 CFG = load_config()
 

@@ -14,7 +14,7 @@ from photoservo.config import load_config
 from photoservo.servo.motion import Motion
 from photoservo.servo.session import Controller, build_sim, left_centre, run_lockstep
 from photoservo.sim.world import LockstepArm, TargetMotion, sim_hand_eye
-from photoservo.sim.renderer import synthetic_rig
+from photoservo.sim.scenes import synthetic_rig
 from photoservo.vision.tracker import Track
 
 EXAMPLES = Path(__file__).resolve().parents[1] / "examples"

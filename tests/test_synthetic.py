@@ -14,19 +14,17 @@ from photoservo.config import load_config
 from photoservo.vision.photo_model import build_photo_model, hue_image
 from photoservo.vision.rig import Camera, Rig, load_rig, project_points
 from photoservo.sim.renderer import (
-    EFFECTS,
     CameraEffects,
     Scene,
     calm_water,
     floater_from_model,
     lying_on_water,
     make_transform,
-    random_scene,
     render_stereo,
     render_view,
     stereo_transform,
-    synthetic_rig,
 )
+from photoservo.sim.scenes import EFFECTS, random_scene, synthetic_rig
 
 CFG = load_config()
 

@@ -18,9 +18,9 @@ from photoservo.sim.renderer import (
     _floater_layer,
     _world_rays,
     coarse_rays,
-    random_scene,
     render_view,
 )
+from photoservo.sim.scenes import random_scene
 
 CFG = load_config()
 PM = CFG.photo_model

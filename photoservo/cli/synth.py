@@ -33,7 +33,7 @@ from photoservo.config import load_config
 from photoservo.vision.photo_model import load_photo_model
 from photoservo.vision.rig import dump_rig, load_rig
 from photoservo.sim.specimens import SPECIES
-from photoservo.sim.renderer import DEFAULT_EFFECTS, EFFECTS, random_scene
+from photoservo.sim.scenes import DEFAULT_EFFECTS, EFFECTS, random_scene
 
 
 def parse_effects(text: str) -> tuple[str, ...]:

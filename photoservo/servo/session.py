@@ -45,7 +45,7 @@ from photoservo.servo.motion import Motion, Setpoint
 from photoservo.sim.world import LockstepArm, SimScene, TargetMotion, sim_hand_eye
 from photoservo.vision.fitness import StereoHue, project_model, stereo_hue
 from photoservo.vision.rig import Rig
-from photoservo.sim.renderer import synthetic_rig
+from photoservo.sim.scenes import synthetic_rig
 from photoservo.vision.tracker import Track, Tracker
 
 Phase = Literal["servo", "descend", "grasp", "ascend", "done", "stopped"]

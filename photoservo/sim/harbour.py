@@ -27,7 +27,7 @@ face-up has its model z pointing down into the water).
 
 API: `random_scene(seed, params, photo_params, kind, other_photo, empty, distractor, foam_split,
 many_hued, ...)` -> `SyntheticScene` (the same object and truth shape as
-`sim/renderer.random_scene`). Creatures and their studio photos: `sim/creatures.py`; water,
+`sim/scenes.random_scene`). Creatures and their studio photos: `sim/creatures.py`; water,
 occluders, light and the camera image: `sim/harbour_look.py`.
 """
 
@@ -43,7 +43,7 @@ from photoservo.errors import InputError
 from photoservo.geometry import make_pose
 from photoservo.sim.creatures import KINDS, PHOTO_SIZE, Creature, draw_creature, float_buoy, recoloured, studio_photo
 from photoservo.sim.harbour_look import FoamBand, HarbourScene, HarbourWater, Light, Placed, render_camera
-from photoservo.sim.renderer import (
+from photoservo.sim.scenes import (
     SynthParams,
     SyntheticScene,
     match_individuals,
@@ -234,7 +234,7 @@ def random_scene(seed: int, params: SynthParams, photo_params: PhotoModelParams,
     Everything else (water, light, occluders) is this generator's own (module docstring).
 
     other_photo: the estimator's photo shows another individual (truth matched by mask area and
-    centroid, `match_individuals`, as in `sim/renderer.random_scene`). empty: no creature.
+    centroid, `match_individuals`, as in `sim/scenes.random_scene`). empty: no creature.
     distractor: a look-alike (another species, a recoloured copy, or a float in the creature's
     hue) elsewhere in view. foam_split: a foam band across the creature's middle that cuts its
     visible region in two. many_hued (fish): the many-hued creature (see `draw_creature`).
