@@ -242,6 +242,11 @@ def _recording_files(rec) -> str | None:
     return str(rec.path) if rec.written else None
 
 
+def _say(line: str) -> None:
+    """A one-line notice on stderr before the session starts (the warm start's on a first run)."""
+    print(line, file=sys.stderr, flush=True)
+
+
 def _run_sim(args, cfg) -> int:
     from photoservo.sim.emulator_process import EmulatorProcess
     from photoservo.servo.session import build_sim, run_lockstep, run_sim_realtime
@@ -257,13 +262,14 @@ def _run_sim(args, cfg) -> int:
             _setup_static(rec, cfg, sim.rig, sim.scene.photo, sim.scene.model, args.seed, {"sim": cfg.sim.seed})
         if args.lockstep or cfg.sim.lockstep:
             sc = run_lockstep(cfg, args.duration, collect=args.collect, no_motion=args.no_motion,
-                              recorder=rec, status=status, seed=args.seed, setup=sim)
+                              recorder=rec, status=status, seed=args.seed, setup=sim, say=_say)
         else:
             emu = EmulatorProcess(cfg.emulator, sim.limits, q0=sim.q0)  # its own process, prioritised
             emu.start()
             try:
                 sc = run_sim_realtime(cfg, args.duration, sim, emu, collect=args.collect, no_motion=args.no_motion,
-                                      recorder=rec, status=status, seed=args.seed, rt_priority=args.rt_priority)
+                                      recorder=rec, status=status, seed=args.seed, rt_priority=args.rt_priority,
+                                      say=_say)
             finally:
                 emu.stop()
                 if rec is not None:  # what the emulated bridge saw: the stop and servo off, in order
@@ -315,7 +321,7 @@ def _run_hardware(args, cfg) -> int:
                 _setup_static(rec, cfg, rig, photo, model, args.seed, {})
             sc = run_realtime(cfg, args.duration, port=args.port, cameras=ReaderCameras(reader), model=model,
                               rig=rig, collect=args.collect, no_motion=args.no_motion, recorder=rec,
-                              status=status, seed=args.seed, rt_priority=args.rt_priority)
+                              status=status, seed=args.seed, rt_priority=args.rt_priority, say=_say)
     except KeyboardInterrupt as e:  # Ctrl-C, SIGTERM, SIGHUP: the session stopped the arm in order
         stop = e
     finally:

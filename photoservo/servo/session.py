@@ -47,6 +47,7 @@ from photoservo.vision.fitness import StereoHue, project_model, stereo_hue
 from photoservo.vision.rig import Rig
 from photoservo.sim.scenes import synthetic_rig
 from photoservo.vision.tracker import Track, Tracker
+from photoservo.servo.warm import warm_start
 
 Phase = Literal["servo", "descend", "grasp", "ascend", "done", "stopped"]
 REACH_MM = 1250.0  # distance from the shoulder (S2 axis) beyond which the PA-10 cannot hover
@@ -257,11 +258,14 @@ class Frame:
 
 def run_lockstep(cfg: Config, duration_s: float, *, collect: bool = False, no_motion: bool = False,
                  recorder=None, status: StatusFn | None = None, seed: int = 0,
-                 settle_s: float = 5.0, setup: SimSetup | None = None) -> Scores:
+                 settle_s: float = 5.0, setup: SimSetup | None = None,
+                 say: Callable[[str], None] | None = None) -> Scores:
     """A simulated session on the simulator's clock (deterministic). Returns the scores; hold
-    accuracy is measured against the desired pose of the TRUE target from `settle_s` on."""
+    accuracy is measured against the desired pose of the TRUE target from `settle_s` on.
+    `say` gets the warm start's one-line notice of a first run."""
     sim = setup or build_sim(cfg)
     rig, scene = sim.rig, sim.scene
+    warm_start(scene.model, rig, cfg.fitness, scene=scene, say=say)
     T_fl = rig.T_flange_left()
     centre = left_centre(rig)
     arm = LockstepArm(cfg.emulator, sim.limits, sim.q0)
@@ -403,6 +407,7 @@ def _render_process(cfg: Config, requests, frames) -> None:
     (t_left, t_right, T_base_left, T_base_left_at_right) into a stereo pair."""
     ignore_stop_signals()  # the session stops it
     scene = build_sim(cfg).scene
+    scene.warm()  # compile or load the renderer's kernel before the session's clock starts
     frames.send(("ready",))
     while True:
         try:
@@ -430,18 +435,22 @@ class SimCameras:
         self._frm_rx, self._frm_tx = ctx.Pipe(duplex=False)
         self._proc = ctx.Process(target=_render_process, args=(cfg, self._req_rx, self._frm_tx),
                                  name="photoservo-cameras", daemon=True)
-        start_child(self._proc)
-        if not self._frm_rx.poll(60.0):
-            raise RuntimeError("the simulated cameras' renderer did not start within 60 s")
-        self._frm_rx.recv()
+        start_child(self._proc)  # it compiles or loads its kernel meanwhile: see wait_ready
         self._cond = threading.Condition()
         self._in_flight: deque[tuple[int, float]] = deque()
         self._stop = False
         self.index = 0
         self._shutter = threading.Thread(target=self._expose, name="sim-shutter", daemon=True)
 
+    def wait_ready(self, timeout_s: float = 300.0) -> None:
+        """Wait until the renderer process has built the scene and warmed its kernel (a first run
+        compiles it: seconds, more on a loaded machine)."""
+        if not self._frm_rx.poll(timeout_s):
+            raise RuntimeError(f"the simulated cameras' renderer did not start within {timeout_s:.0f} s")
+        self._frm_rx.recv()
+
     def start(self, t0: float) -> None:
-        """Start exposing; scene time is monotonic time minus t0."""
+        """Start exposing (after `wait_ready`); scene time is monotonic time minus t0."""
         self.t0 = t0
         self._shutter.start()
 
@@ -541,7 +550,7 @@ class ControlJob:
     no_motion: bool
     motion_truth: TargetMotion | None  # simulation: scores the hold against the true target
     size_truth: tuple[float, float] | None
-    t0: float
+    t0: float | None  # None: sent as ("t0", t) once the session's clock starts
     settle_s: float
     rt_priority: int | None  # None: best effort (raise_priority), N: SCHED_FIFO N or an event saying why not
     simulated: bool = False  # the bridge is the simulator's emulator (errors speak of it)
@@ -583,12 +592,16 @@ def control_process(job: ControlJob, conn, stop) -> None:
                 link.enable()
             conn.send(("ready",))
             rate = Rate(cfg.motion.rate_hz)
-            track, tool = None, False
+            track, tool, t0 = None, False, job.t0
             try:
                 while not stop.is_set():
                     now = time.monotonic()
                     while conn.poll():
-                        track = conn.recv()
+                        msg = conn.recv()
+                        if isinstance(msg, tuple):  # ("t0", t): the session's clock started
+                            t0 = msg[1]
+                        else:
+                            track = msg
                     st = link.state()
                     info = ctrl.step(now, st.q, st.dq, track)
                     if not job.no_motion:
@@ -596,8 +609,8 @@ def control_process(job: ControlJob, conn, stop) -> None:
                         if info.tool != tool:
                             link.tool(info.tool)
                             tool = info.tool
-                    if job.motion_truth is not None:
-                        _score_hold_truth(sc, ctrl, job.motion_truth, job.size_truth, info, now - job.t0,
+                    if job.motion_truth is not None and t0 is not None:
+                        _score_hold_truth(sc, ctrl, job.motion_truth, job.size_truth, info, now - t0,
                                           job.settle_s, job.centre)
                     conn.send(("tick", now, st.t, st.q, info.setpoint.q, info.setpoint.dq, info.T_base_cam_des,
                                info.phase, info.position_error_mm, info.yaw_error_deg, info.stop_reason,
@@ -622,17 +635,21 @@ def run_realtime(cfg: Config, duration_s: float, *, port: str, cameras, model, r
                  collect: bool = False, no_motion: bool = False, recorder=None,
                  status: StatusFn | None = None, seed: int = 0, scene: SimScene | None = None,
                  t0: float | None = None, settle_s: float = 5.0, rt_priority: int | None = None,
-                 stop_event: threading.Event | None = None, simulated: bool = False) -> Scores:
+                 stop_event: threading.Event | None = None, simulated: bool = False,
+                 start_clock: Callable[[], float] | None = None, say: Callable[[str], None] | None = None) -> Scores:
     """The real-time session. The control loop (`control_process`) runs in its own process,
     connected to the bridge at `port`; this process reads stereo frames from `cameras` (`read()`
     -> (index, left, right, t_left, t_right) on the monotonic clock), places each at the joint
     state of its capture time (streamed back by the control process), runs the tracker and sends
     each track over. Stopping (duration, Ctrl-C, an error here or a fault there) ends with the
-    arm stopped and the servo off. `scene` (simulation) scores hold accuracy against the truth."""
+    arm stopped and the servo off. `scene` (simulation) scores hold accuracy against the truth.
+    The kernels are warmed first (`warm_start`; `say` gets its notice on a first run) and the
+    session's clock starts once the control process is ready: at t0, or at what `start_clock()`
+    returns then (the simulator starts its cameras and world there), else when it is ready."""
     T_fl = rig.T_flange_left()
+    warm_start(model, rig, cfg.fitness, say=say)  # before the arm is enabled (no-op when warmed already)
     tracker = Tracker.from_config(model, rig, cfg, seed=seed)
     sc = Scores()
-    t0 = time.monotonic() if t0 is None else t0
     stop = stop_event or threading.Event()
     ctx = multiprocessing.get_context("spawn")
     parent, child = ctx.Pipe()
@@ -682,6 +699,9 @@ def run_realtime(cfg: Config, duration_s: float, *, port: str, cameras, model, r
             if time.monotonic() > deadline:
                 raise RuntimeError("the control process did not start within 30 s")
             time.sleep(0.01)
+        if t0 is None:  # the clock starts now: the arm is enabled, the kernels are warm
+            t0 = start_clock() if start_clock is not None else time.monotonic()
+            parent.send(("t0", t0))
         while not stop.is_set() and time.monotonic() - t0 < duration_s:
             c0 = time.perf_counter()
             got = cameras.read()
@@ -735,11 +755,16 @@ def run_sim_realtime(cfg: Config, duration_s: float, sim: SimSetup, emulator, **
     started sim.emulator.Emulator, or EmulatorProcess as `track` runs it) has the arm, the
     control process on its pty, hold scored against the truth. kwargs go to `run_realtime`."""
     cams = SimCameras(cfg, emulator, sim.rig.T_flange_left())
-    t0 = time.monotonic()
-    cams.start(t0)
-    try:
+    try:  # the kernels compile (first run) or load here and in the renderer process at once
+        warm_start(sim.scene.model, sim.rig, cfg.fitness, scene=sim.scene, render_here=False, say=kwargs.get("say"))
+        cams.wait_ready()
+
+        def start_clock() -> float:  # the control process is ready: the world starts moving now
+            t0 = time.monotonic()
+            cams.start(t0)
+            return t0
         return run_realtime(cfg, duration_s, port=emulator.path, cameras=cams, model=sim.scene.model,
-                            rig=sim.rig, scene=sim.scene, t0=t0, simulated=True, **kwargs)
+                            rig=sim.rig, scene=sim.scene, simulated=True, start_clock=start_clock, **kwargs)
     finally:
         cams.close()
 

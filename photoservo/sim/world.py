@@ -182,6 +182,23 @@ class SimScene:
                             water_stride=SIM_WATER_STRIDE, water_rays=water_right)
         return left, right
 
+    def kernels(self) -> list:
+        """The compiled kernels `render` runs (for the session's warm start)."""
+        from photoservo.sim import renderer_kernel
+
+        return [renderer_kernel.water_pass]
+
+    def warm(self) -> None:
+        """Compile or load the renderer's kernels (issue 10, warm start): one left view from
+        hover height over the creature's start, with a throwaway noise generator, so the
+        scene's own noise sequence (and every later render) is unchanged."""
+        T_base_left = np.eye(4)
+        T_base_left[:3, :3] = np.diag([1.0, -1.0, -1.0])  # looking straight down
+        T_base_left[:3, 3] = self.motion.pose(0.0)[:3, 3] + np.array([0.0, 0.0, 600.0])
+        render_view(self.scene(0.0), self.rig.left, self.T_world_base @ T_base_left, 0.0,
+                    np.random.default_rng(0), CameraEffects(noise_sigma=2.0), self.renderer.rays_left,
+                    water_stride=SIM_WATER_STRIDE, water_rays=self.renderer.water_rays(SIM_WATER_STRIDE)[0])
+
 
 # ----------------------------------------------------------------------------- lockstep arm
 

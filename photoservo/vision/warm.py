@@ -1,0 +1,63 @@
+"""Warm start of the compiled (numba) kernels (issue 10): a session compiles or loads every kernel
+it will run BEFORE its clock starts, so the first frame after `pip install` is as fast as any.
+
+numba compiles a kernel on its first call and caches the machine code on disk (`cache=True`,
+next to the sources or in NUMBA_CACHE_DIR); a later process only loads it. Both happen at the
+first call, which inside a session means: the first frame stalls for seconds (compiling) or about
+half a second (loading), the creature drifts on and the track is lost. `warm_fitness` makes that
+first call on an empty frame of the session's own rig and photo-model, so every argument has the
+type it has in the loop (one compiled signature, the one the loop needs). `kernels_cached` tells
+beforehand whether it will compile, so the session can say why it waits.
+"""
+
+from __future__ import annotations
+
+import time
+from types import ModuleType
+
+import numpy as np
+
+from photoservo.vision.fitness import FitnessParams, StereoHue, fitness
+from photoservo.vision.photo_model import NO_HUE, PhotoModel
+from photoservo.vision.rig import Rig
+
+
+def dispatchers(module: ModuleType) -> dict:
+    """The numba kernels (`njit` dispatchers) defined in `module`, by name."""
+    from numba.core.dispatcher import Dispatcher
+
+    return {k: v for k, v in vars(module).items()
+            if isinstance(v, Dispatcher) and getattr(v.py_func, "__module__", None) == module.__name__}
+
+
+def kernels_cached(kernels: list) -> bool:
+    """True when every dispatcher in `kernels` has compiled code in numba's on-disk cache for its
+    current source (its index file exists, is of this numba version and the source is unchanged),
+    i.e. its first call loads instead of compiling. Reads numba's cache index through the
+    dispatcher's cache object (`_cache._cache_file`, numba 0.5x-0.6x); if that layout changes,
+    answers False (the caller then announces a compile that may turn out to be a load)."""
+    try:
+        return all(bool(k._cache._cache_file._load_index()) for k in kernels)
+    except Exception:  # noqa: BLE001 - a numba internal changed: assume nothing is cached
+        return False
+
+
+def fitness_kernels(params: FitnessParams) -> list:
+    """The dispatchers `fitness` calls from Python with these params (empty for the numpy
+    reference): the counting kernel (serial or parallel) and `combine`."""
+    if params.kernel == "numpy":
+        return []
+    from photoservo.vision import fitness_kernel as fk
+
+    return [fk.counts_parallel if params.kernel == "numba-parallel" else fk.counts_serial, fk.combine]
+
+
+def warm_fitness(model: PhotoModel, rig: Rig, params: FitnessParams) -> float:
+    """Compile or load the fitness kernels (method step 3) with the loop's own argument types: one
+    fitness call on an empty (no-hue) frame of the rig's image size, the model 500 mm ahead of the
+    left camera at alpha 1 px/mm. Returns the seconds it took."""
+    t0 = time.perf_counter()
+    frame = StereoHue(left=np.full((rig.left.height, rig.left.width), NO_HUE, np.uint8),
+                      right=np.full((rig.right.height, rig.right.width), NO_HUE, np.uint8))
+    fitness(np.eye(3)[None], np.array([[0.0, 0.0, 500.0]]), np.array([1.0]), model, frame, rig, params)
+    return time.perf_counter() - t0
