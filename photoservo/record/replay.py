@@ -57,6 +57,7 @@ from photoservo.errors import InputError
 from photoservo.config import Config, load_config
 from photoservo.record.compare import Comparison, compare_runs
 from photoservo.record.reader import Frame, Recording, describe_truncation, iter_frames, read_recording
+from photoservo.robot.arm import JointHistory
 from photoservo.tomlconf import dump_config
 
 # ------------------------------------------------------------------------------------------
@@ -219,22 +220,6 @@ class ReplayResult:
         return len(self.frames) / self.seconds if self.seconds > 0 else float("nan")
 
 
-class RecordedArm:
-    """The recorded joint states as a function of time: q (rad) linearly interpolated between
-    the arm/q samples, dq (rad/s) from their finite differences."""
-
-    def __init__(self, t: np.ndarray, q: np.ndarray) -> None:
-        t, idx = np.unique(np.asarray(t, dtype=np.float64), return_index=True)
-        self.t, self.q = t, np.asarray(q, dtype=np.float64)[idx]
-        self.dq = (np.gradient(self.q, self.t, axis=0) if len(self.t) > 1
-                   else np.zeros_like(self.q))
-
-    def at(self, t: float) -> tuple[np.ndarray, np.ndarray]:
-        q = np.array([np.interp(t, self.t, self.q[:, j]) for j in range(self.q.shape[1])])
-        dq = np.array([np.interp(t, self.t, self.dq[:, j]) for j in range(self.dq.shape[1])])
-        return q, dq
-
-
 def _frames_with_meta(setup: ReplaySetup) -> Iterator[tuple[Frame, Any]]:
     """The recorded frames (images streamed from the file) with their metadata, in order."""
     meta = {m.index: m for m in setup.recording.frames}
@@ -317,7 +302,7 @@ def replay(setup: ReplaySetup, out: str | Path | None = None, *, view: bool = Fa
     ctrl = S.Controller(cfg.servo, Motion(cfg.motion, pa10.load_limits()), T_fl, centre)
     truth = {tr.frame: tr for tr in rec.truth}
     q_series = rec.arm.get("q")
-    arm = RecordedArm(q_series.t, q_series.values) if q_series is not None and len(q_series.t) else None
+    arm = JointHistory.from_samples(q_series.t, q_series.values) if q_series is not None and len(q_series.t) else None
     dt = 1.0 / cfg.motion.rate_hz
     latency = cfg.sim.capture_latency_s
     busy = _processing_delays(rec) if not setup.recorded_cfg.sim.lockstep else {}
@@ -368,8 +353,9 @@ def replay(setup: ReplaySetup, out: str | Path | None = None, *, view: bool = Fa
                 pending = next(frames, None)
 
         if arm is not None:
-            i0 = math.ceil(arm.t[0] / dt - 1e-6)
-            i1 = math.floor(arm.t[-1] / dt + 1e-6)
+            t_first, t_last = arm.span
+            i0 = math.ceil(t_first / dt - 1e-6)
+            i1 = math.floor(t_last / dt + 1e-6)
             for i in range(i0, i1 + 1):
                 now = i * dt
                 deliver(now)

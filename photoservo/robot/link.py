@@ -30,12 +30,13 @@ import numpy as np
 import serial
 
 from photoservo.robot import protocol as P
+from photoservo.robot.arm import Arm, JointHistory
 from photoservo.robot.link_quality import BAD, REFUSED, WATCHDOG, LinkQuality, QualityWindow, report_events
 from photoservo.robot.link_types import JointState, LinkError, LinkParams, LinkQualityError, describe_nack  # noqa: F401
 from photoservo.robot.pa10 import fk
 
 
-class Link:
+class Link(Arm):
     """Serial client of the bridge (life cycle: the module docstring). Setpoints are paced by
     the line's baud rate (`params.baud`): a setpoint is dropped (and counted) while more than
     MAX_BACKLOG_FRAMES setpoints' worth of bytes are still due on the line, because the OS
@@ -69,6 +70,7 @@ class Link:
         self._cond = threading.Condition()
         self._replies: dict[int, P.Message] = {}
         self._history: deque[JointState] = deque()
+        self._joints = JointHistory(params.history_s)  # the same states, for state_at
         self._offsets: deque[float] = deque(maxlen=512)
         self._error: LinkError | None = None
         self._quality = QualityWindow(params.quality_window_s)
@@ -103,6 +105,7 @@ class Link:
             self._bad_seen = 0
             self._last_report = None
             self._history.clear()
+            self._joints = JointHistory(self.params.history_s)
             self._replies.clear()
             self._offsets.clear()
         try:
@@ -273,26 +276,13 @@ class Link:
         """
         self._check()
         with self._cond:
-            hist = list(self._history)
-        if not hist:
-            raise LookupError("no state received yet")
-        last = hist[-1]
-        if t >= last.t:
-            period = (self.version.state_period_us * 1e-6) if self.version else 0.004
-            if t - last.t > 2 * period + 1e-3:
-                raise LookupError(f"time {t:.4f} is {1e3 * (t - last.t):.1f} ms after the latest state")
-            dt = t - last.t
-            return JointState(t, last.t_rx, last.q + last.dq * dt, last.dq.copy(), last.status,
-                              last.fault, last.report)
-        if t < hist[0].t:
-            raise LookupError(f"time {t:.4f} is older than the kept state history "
-                              f"({1e3 * (hist[-1].t - hist[0].t):.0f} ms)")
-        ts = np.fromiter((s.t for s in hist), float, len(hist))
-        i = int(np.searchsorted(ts, t, side="right"))  # hist[i-1].t <= t < hist[i].t
-        a, b = hist[i - 1], hist[i]
-        w = 0.0 if b.t == a.t else (t - a.t) / (b.t - a.t)
-        return JointState(t, b.t_rx, a.q + w * (b.q - a.q), a.dq + w * (b.dq - a.dq),
-                          a.status, a.fault, a.report)
+            if not self._history:
+                raise LookupError("no state received yet")
+            last, joints = self._history[-1], self._joints
+        period = (self.version.state_period_us * 1e-6) if self.version else 0.004
+        joints.ahead_s = 2 * period + 1e-3
+        q, dq = joints.at(t)
+        return JointState(t, last.t_rx, q, dq, last.status, last.fault, last.report)
 
     def flange_at(self, t: float, T_flange_tool: np.ndarray | None = None) -> np.ndarray:
         """Pose of the flange (or of a tool / the left camera attached by T_flange_tool) in the
@@ -452,7 +442,9 @@ class Link:
                 self._count_report(m, t_rx)
                 if self._history and s.t < self._history[-1].t:
                     self._history.clear()  # bridge clock jumped (restart): start over
+                    self._joints = JointHistory(self.params.history_s)
                 self._history.append(s)
+                self._joints.append(s.t, s.q, s.dq)
                 while self._history and s.t - self._history[0].t > self.params.history_s:
                     self._history.popleft()
             elif isinstance(m, P.VersionInfo):

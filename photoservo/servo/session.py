@@ -30,6 +30,7 @@ from typing import Callable, Literal
 import numpy as np
 
 from photoservo.robot import pa10
+from photoservo.robot.arm import JointHistory
 from photoservo.geometry import make_pose, pose_error
 from photoservo.robot import protocol as P
 from photoservo.robot.clock import Rate, ignore_stop_signals, raise_priority, set_realtime, start_child
@@ -505,39 +506,6 @@ class ReaderCameras:
         return None if f is None else (f.index, f.left, f.right, f.t_left, f.t_right)
 
 
-class StateHistory:
-    """Recent joint states (t, q, dq) on the monotonic clock, for where the cameras were at a
-    frame's capture time: linear interpolation between the two states around t."""
-
-    def __init__(self, keep_s: float = 2.0) -> None:
-        self.keep_s = keep_s
-        self._t: deque[float] = deque()
-        self._q: deque[np.ndarray] = deque()
-        self._lock = threading.Lock()
-
-    def append(self, t: float, q: np.ndarray) -> None:
-        with self._lock:
-            self._t.append(t)
-            self._q.append(np.asarray(q, float))
-            while self._t and self._t[0] < t - self.keep_s:
-                self._t.popleft()
-                self._q.popleft()
-
-    def q_at(self, t: float) -> np.ndarray:
-        """Joint positions at time t (rad). Raises LookupError outside the kept history (a
-        little past the newest state is allowed: 10 ms)."""
-        with self._lock:
-            ts, qs = list(self._t), list(self._q)
-        if not ts or t < ts[0] or t > ts[-1] + 0.01:
-            raise LookupError(f"no joint state around time {t:.4f}")
-        i = int(np.searchsorted(ts, t, side="right"))
-        if i >= len(ts):
-            return qs[-1]
-        a, b = ts[i - 1], ts[i]
-        w = 0.0 if b == a else (t - a) / (b - a)
-        return qs[i - 1] + w * (qs[i] - qs[i - 1])
-
-
 @dataclass(frozen=True)
 class ControlJob:
     """What the control process needs, picklable (it starts with `spawn`)."""
@@ -659,7 +627,7 @@ def run_realtime(cfg: Config, duration_s: float, *, port: str, cameras, model, r
                      t0, settle_s, rt_priority, simulated)
     proc = ctx.Process(target=control_process, args=(job, child, child_stop), name="photoservo-control", daemon=True)
     start_child(proc)
-    history = StateHistory()
+    history = JointHistory(keep_s=2.0, ahead_s=0.01)  # joint states streamed back by the control process
     latest: dict = {}
     result: dict = {}
 
@@ -710,7 +678,7 @@ def run_realtime(cfg: Config, duration_s: float, *, port: str, cameras, model, r
             k, left, right, t_l, t_r = got
             sc.time("capture", 1e3 * (time.perf_counter() - c0))
             try:
-                T_l = pa10.fk(history.q_at(t_l)) @ T_fl
+                T_l = pa10.fk(history.at(t_l)[0]) @ T_fl
             except LookupError as e:  # no arm state for the capture time: cannot place the frame
                 sc.dropped_frames += 1
                 if recorder is not None and sc.dropped_frames == 1:

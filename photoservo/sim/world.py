@@ -18,6 +18,7 @@ from photoservo.errors import InputError
 from photoservo.fileio import read_image
 from photoservo.geometry import axis_rotation
 from photoservo.robot import protocol as P
+from photoservo.robot.arm import Arm, JointHistory
 from photoservo.sim.emulator import BridgeModel, EmulatorParams
 from photoservo.robot.link import LinkError
 from photoservo.robot.pa10 import PA10Limits
@@ -214,7 +215,7 @@ class ArmState:
     fault: P.Fault
 
 
-class LockstepArm:
+class LockstepArm(Arm):
     """The controller emulator's bridge (sim/emulator.py `BridgeModel`) clocked by the
     simulation instead of a thread: every host message is encoded with the wire protocol and
     decoded by a protocol `Decoder` — the same bytes a pty would carry — but time advances only
@@ -227,7 +228,8 @@ class LockstepArm:
         self.decoder = P.Decoder()
         self.now = now
         self._seq = 0
-        self._hist: list[ArmState] = []
+        self._last: ArmState | None = None
+        self.history = JointHistory(keep_s=4.0)
         self.nacks: list[P.Nack] = []
         self.state_period = 1.0 / params.state_hz
         self._t_report = -1.0
@@ -274,26 +276,21 @@ class LockstepArm:
 
     def _record(self) -> None:
         m = self.model
-        self._hist.append(ArmState(self.now, m.q.copy(), m.dq.copy(), m.status(), P.Fault(m.fault)))
-        if len(self._hist) > 2000:
-            del self._hist[:1000]
+        self._last = ArmState(self.now, m.q.copy(), m.dq.copy(), m.status(), P.Fault(m.fault))
+        self.history.append(self.now, self._last.q, self._last.dq)
 
     def state(self) -> ArmState:
         """The latest state (as a state report at the bridge's state rate would give it)."""
-        return self._hist[-1]
+        return self._last
 
     def state_at(self, t: float) -> ArmState:
-        """Joint state at simulated time t, interpolated between ticks."""
-        h = self._hist
-        if t >= h[-1].t:
-            return h[-1]
-        ts = [s.t for s in h]
-        i = int(np.searchsorted(ts, t, side="right"))
-        if i == 0:
-            raise LookupError(f"time {t:.4f} is older than the kept state history")
-        a, b = h[i - 1], h[i]
-        w = 0.0 if b.t == a.t else (t - a.t) / (b.t - a.t)
-        return ArmState(t, a.q + w * (b.q - a.q), a.dq + w * (b.dq - a.dq), a.status, a.fault)
+        """Joint state at simulated time t, interpolated between ticks (robot/arm.JointHistory);
+        at or after the last tick the latest (the bridge holds it until the next tick)."""
+        last = self._last
+        if t >= last.t:
+            return last
+        q, dq = self.history.at(t)
+        return ArmState(t, q, dq, last.status, last.fault)
 
     def close(self) -> None:
         pass
