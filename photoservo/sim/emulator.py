@@ -169,86 +169,102 @@ class Emulator:
             self.error = e
 
     def _loop(self) -> None:
+        """Until stopped: take the host's bytes (paced), tick the model at the control rate and
+        stream its state, send the replies (paced), then wait for whatever comes first."""
         p = self.params
-        T = 1.0 / p.control_hz
-        state_every = max(1, round(p.control_hz / p.state_hz))
-        rx_pace, tx_pace = Pacer(p.baud), Pacer(p.baud)
-        tx_buf = bytearray()
-        master = self._master
-        next_tick = time.monotonic() + T
-        n_tick = 0
-        frame_len = len(P.encode(self.model.report(), 0))
+        self._T = 1.0 / p.control_hz
+        self._state_every = max(1, round(p.control_hz / p.state_hz))
+        self._rx_pace, self._tx_pace = Pacer(p.baud), Pacer(p.baud)
+        self._tx_buf = bytearray()
+        self._next_tick = time.monotonic() + self._T
+        self._n_tick = 0
+        self._frame_len = len(P.encode(self.model.report(), 0))
+        self._fd = self._master  # the pty as the loop started (stop() closes it after the loop)
         while not self._stop.is_set():
             now = time.monotonic()
             silent = self._silent.is_set()
-            rx_throttled = False
-            # receive: read only what the line could have carried (the rest stays in the pty)
-            if not silent:
-                n = rx_pace.allow(now)
-                if n > 0:
-                    try:
-                        data = os.read(master, n)
-                    except BlockingIOError:
-                        data = b""
-                    except OSError as e:
-                        if e.errno == errno.EIO:  # nobody has the slave open (not possible: we hold it)
-                            data = b""
-                        else:
-                            raise
-                    rx_pace.spend(len(data))
-                    rx_throttled = rx_pace.rate > 0 and len(data) == n
-                    self.rx_faults.push(data, now)
-                got = self.rx_faults.pop(now)
-                if got:
-                    with self._lock:
-                        for frame in self.decoder.iter_feed(got):
-                            for reply in self.model.handle(frame, now):
-                                self._send(reply, now)
-                        self.model.rx_crc_errors = self.decoder.errors
-            # control tick(s)
-            if now >= next_tick:
-                with self._lock:
-                    self.model.tick(next_tick)
-                    if self.on_tick is not None:
-                        m = self.model
-                        self.on_tick(next_tick, m.q, m.dq, int(m.status()), int(m.fault))
-                    n_tick += 1
-                    if n_tick % state_every == 0 and not silent:
-                        if len(tx_buf) + self.tx_faults.queued_bytes() > frame_len:
-                            self.states_skipped += 1  # line still busy with the last one
-                        else:
-                            self._send(self.model.report(), now)
-                            self.states_sent += 1
-                next_tick += T
-                if now - next_tick > 5 * T:  # fell far behind (machine stalled): do not burst
-                    self.tick_overruns += 1
-                    next_tick = now + T
-            # transmit, paced
-            tx_buf += self.tx_faults.pop(now)
-            if silent:
-                tx_buf.clear()
-            if tx_buf:
-                n = min(tx_pace.allow(now), len(tx_buf))
-                if n > 0:
-                    try:
-                        w = os.write(master, bytes(tx_buf[:n]))
-                    except BlockingIOError:
-                        w = 0
-                    tx_pace.spend(w)
-                    del tx_buf[:w]
-            # wait: for the next tick, a byte from the host, or the line to free up
-            now = time.monotonic()
-            timeout = next_tick - now
-            if tx_buf:
-                timeout = min(timeout, max(tx_pace.wait_for(len(tx_buf)), 2e-4))
-            for q in (self.rx_faults, self.tx_faults):
-                r = q.next_release()
-                if r is not None:
-                    timeout = min(timeout, r - now)
-            if rx_throttled:  # more may be waiting: come back when the line has carried some
-                timeout = min(timeout, max(rx_pace.wait_for(16), 2e-4))
-            timeout = max(0.0, timeout)
-            if silent or rx_throttled:
-                time.sleep(min(timeout, 0.005))
-            else:
-                select.select([master], [], [], timeout)
+            rx_throttled = False if silent else self._receive(now)
+            if now >= self._next_tick:
+                self._tick(now, silent)
+            self._transmit(now, silent)
+            self._wait(rx_throttled, silent)
+
+    def _receive(self, now: float) -> bool:
+        """Read only what the line could have carried (the rest stays in the pty), through the
+        fault injector, into the model. True when the line's rate limited the read."""
+        n = self._rx_pace.allow(now)
+        throttled = False
+        if n > 0:
+            try:
+                data = os.read(self._fd, n)
+            except BlockingIOError:
+                data = b""
+            except OSError as e:
+                if e.errno != errno.EIO:  # EIO: nobody has the slave open (not possible: we hold it)
+                    raise
+                data = b""
+            self._rx_pace.spend(len(data))
+            throttled = self._rx_pace.rate > 0 and len(data) == n
+            self.rx_faults.push(data, now)
+        got = self.rx_faults.pop(now)
+        if got:
+            with self._lock:
+                for frame in self.decoder.iter_feed(got):
+                    for reply in self.model.handle(frame, now):
+                        self._send(reply, now)
+                self.model.rx_crc_errors = self.decoder.errors
+        return throttled
+
+    def _tick(self, now: float, silent: bool) -> None:
+        """One control tick of the model (published through on_tick); every state period a
+        state report, unless the line is still busy with the last one."""
+        with self._lock:
+            self.model.tick(self._next_tick)
+            if self.on_tick is not None:
+                m = self.model
+                self.on_tick(self._next_tick, m.q, m.dq, int(m.status()), int(m.fault))
+            self._n_tick += 1
+            if self._n_tick % self._state_every == 0 and not silent:
+                if len(self._tx_buf) + self.tx_faults.queued_bytes() > self._frame_len:
+                    self.states_skipped += 1
+                else:
+                    self._send(self.model.report(), now)
+                    self.states_sent += 1
+        self._next_tick += self._T
+        if now - self._next_tick > 5 * self._T:  # fell far behind (machine stalled): do not burst
+            self.tick_overruns += 1
+            self._next_tick = now + self._T
+
+    def _transmit(self, now: float, silent: bool) -> None:
+        """Write what the line can carry now of the queued replies and reports."""
+        self._tx_buf += self.tx_faults.pop(now)
+        if silent:
+            self._tx_buf.clear()
+        if self._tx_buf:
+            n = min(self._tx_pace.allow(now), len(self._tx_buf))
+            if n > 0:
+                try:
+                    w = os.write(self._fd, bytes(self._tx_buf[:n]))
+                except BlockingIOError:
+                    w = 0
+                self._tx_pace.spend(w)
+                del self._tx_buf[:w]
+
+    def _wait(self, rx_throttled: bool, silent: bool) -> None:
+        """Sleep until the next tick, a byte from the host, a delayed byte's release or the
+        line freeing up, whichever comes first."""
+        now = time.monotonic()
+        timeout = self._next_tick - now
+        if self._tx_buf:
+            timeout = min(timeout, max(self._tx_pace.wait_for(len(self._tx_buf)), 2e-4))
+        for q in (self.rx_faults, self.tx_faults):
+            r = q.next_release()
+            if r is not None:
+                timeout = min(timeout, r - now)
+        if rx_throttled:  # more may be waiting: come back when the line has carried some
+            timeout = min(timeout, max(self._rx_pace.wait_for(16), 2e-4))
+        timeout = max(0.0, timeout)
+        if silent or rx_throttled:
+            time.sleep(min(timeout, 0.005))
+        else:
+            select.select([self._fd], [], [], timeout)
