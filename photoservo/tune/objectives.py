@@ -79,10 +79,9 @@ class Sources:
 
     def check_files(self) -> None:
         """Every recording exists (a one-line error before the study, not after it)."""
-        from photoservo.record.reader import recording_files
-
         for p in (*self.world_from, *self.recordings):
-            recording_files(p)
+            if not Path(p).is_file():   # a recording is one file (record/recorder.py)
+                raise InputError(f"{p}: recording not found")
 
     @property
     def closed_loop(self) -> bool:
