@@ -77,3 +77,45 @@ def test_max_generations_caps_a_tracking_frame(sim):
     assert tr.search is not None
     assert tr.update(*_frames(cfg, s, 1 / 30), 1 / 30, max_generations=3).generations == 3
     assert tr.update(*_frames(cfg, s, 2 / 30), 2 / 30).generations == cfg.tracker.generations_per_frame
+
+
+def test_water_gate_plane_and_tilt():
+    import cv2
+
+    from photoservo.vision.measurement import water_gate
+
+    T = np.diag([1.0, -1.0, -1.0, 1.0])
+    T[2, 3] = -100.0
+    assert water_gate(T, -100.0, 40.0, 25.0) == ""
+    assert water_gate(T, float("nan"), 40.0, 25.0) == ""
+    T2 = T.copy()
+    T2[2, 3] = -141.0
+    assert water_gate(T2, -100.0, 40.0, 25.0) == "plane"
+    for deg, expect in ((20.0, ""), (30.0, "tilt")):
+        Tt = T.copy()
+        Tt[:3, :3] = cv2.Rodrigues(np.array([math.radians(deg), 0.0, 0.0]))[0] @ T[:3, :3]
+        assert water_gate(Tt, -100.0, 40.0, 25.0) == expect, deg
+
+
+def test_creature_drifting_out_of_a_still_arms_view_is_out_of_view_never_a_pose():
+    """`track --sim --no-motion`: the creature drifts out of the right image; the tracker says
+    out_of_view, and no pose it gave is a false track (more than 50 mm from the truth)."""
+    from photoservo.servo.session import run_lockstep
+
+    cfg = load_config()
+    seen = []
+    orig = Tracker.update
+
+    def spy(self, *a, **k):
+        tk = orig(self, *a, **k)
+        seen.append((tk.t, tk.status, None if tk.T_base_model is None else tk.T_base_model[:3, 3].copy()))
+        return tk
+    Tracker.update = spy
+    try:
+        run_lockstep(cfg, 4.5, no_motion=True, seed=0)
+    finally:
+        Tracker.update = orig
+    assert seen[-1][1] == "out_of_view"
+    sc = build_sim(cfg).scene
+    err = [float(np.linalg.norm(p - sc.motion.pose(t)[:3, 3])) for t, _, p in seen if p is not None]
+    assert len(err) > 40 and max(err) <= 50.0 and np.median(err) <= 15.0, err

@@ -249,8 +249,9 @@ def _say(line: str) -> None:
 
 def _run_sim(args, cfg) -> int:
     from photoservo.sim.emulator_process import EmulatorProcess
-    from photoservo.servo.session import build_sim, run_lockstep, run_sim_realtime
+    from photoservo.servo.session import build_sim, run_lockstep, run_sim_realtime, sim_config
 
+    cfg = sim_config(cfg)  # the recorded config says what the tracker knew: the water plane
     if args.lockstep:  # the recorded effective config then says how the run was clocked (replay reads it)
         cfg = dataclasses.replace(cfg, sim=dataclasses.replace(cfg.sim, lockstep=True))
     sim = build_sim(cfg)

@@ -224,6 +224,14 @@ class SimSetup:
     q0: np.ndarray  # arm start: start_offset_mm and start_yaw_deg off the desired pose
 
 
+def sim_config(cfg: Config) -> Config:
+    """The simulator's config: its water plane is known, so the tracker's plausibility gates use
+    it ([tracker] water_z_mm = [sim] water_z_mm unless set)."""
+    if math.isfinite(cfg.tracker.water_z_mm):
+        return cfg
+    return dataclasses.replace(cfg, tracker=dataclasses.replace(cfg.tracker, water_z_mm=cfg.sim.water_z_mm))
+
+
 def build_sim(cfg: Config) -> SimSetup:
     """The simulated rig (synthetic_rig with the simulator's hand-eye), scene and arm start."""
     base = synthetic_rig()
@@ -264,6 +272,7 @@ def run_lockstep(cfg: Config, duration_s: float, *, collect: bool = False, no_mo
     """A simulated session on the simulator's clock (deterministic). Returns the scores; hold
     accuracy is measured against the desired pose of the TRUE target from `settle_s` on.
     `say` gets the warm start's one-line notice of a first run."""
+    cfg = sim_config(cfg)
     sim = setup or build_sim(cfg)
     rig, scene = sim.rig, sim.scene
     warm_start(scene.model, rig, cfg.fitness, scene=scene, say=say)
@@ -722,6 +731,7 @@ def run_sim_realtime(cfg: Config, duration_s: float, sim: SimSetup, emulator, **
     """`run_realtime` on the simulator: cameras rendering the scene from where `emulator` (a
     started sim.emulator.Emulator, or EmulatorProcess as `track` runs it) has the arm, the
     control process on its pty, hold scored against the truth. kwargs go to `run_realtime`."""
+    cfg = sim_config(cfg)
     cams = SimCameras(cfg, emulator, sim.rig.T_flange_left())
     try:  # the kernels compile (first run) or load here and in the renderer process at once
         warm_start(sim.scene.model, sim.rig, cfg.fitness, scene=sim.scene, render_here=False, say=kwargs.get("say"))

@@ -36,9 +36,10 @@ from photoservo.vision.fitness import FitnessParams, StereoHue
 from photoservo.vision.ga import GAParams
 from photoservo.vision.photo_model import PhotoModel
 from photoservo.geometry import invert_pose, make_pose
+from photoservo.vision.measurement import visible_shares, water_gate
 from photoservo.vision.rig import Rig
 
-Status = Literal["acquiring", "tracking", "coasting", "lost"]
+Status = Literal["acquiring", "tracking", "coasting", "lost", "out_of_view"]
 
 
 @dataclass(frozen=True)
@@ -60,6 +61,9 @@ class TrackerParams:
     max_speed_mm_s: float  # a measured jump faster than this is a miss, not a move (mm/s)
     water_z_mm: float  # water surface height in the base frame (mm); nan = unknown
     plane_search: bool  # search only on the water plane (position on it, heading, alpha)
+    plane_margin_mm: float  # known water: a measured origin farther than this from the plane is a miss (mm)
+    max_tilt_deg: float  # known water: a measured normal farther than this from the vertical is a miss (deg)
+    min_visible: float  # share of S_in inside each image needed to measure; a prediction below: out_of_view
 
     def validate(self, where: str) -> None:
         w = f"{where}." if where else ""
@@ -176,7 +180,10 @@ class Tracker:
             R_l, t_l, alpha_m, f, _ = cand
             if f >= self.threshold:
                 T_bm = T_base_left @ make_pose(R_l, t_l)
-                if self._plausible(T_bm[:3, 3], t):
+                p = self.p
+                seen = min(visible_shares(R_l, t_l, alpha_m, self.model, self.rig))
+                if (self._plausible(T_bm[:3, 3], t) and seen >= p.min_visible
+                        and not water_gate(T_bm, p.water_z_mm, p.plane_margin_mm, p.max_tilt_deg)):
                     measured = (R_l, t_l, alpha_m, f, T_bm)
         fitness = float(cand[3]) if cand is not None else float("-inf")
         if measured is not None:
@@ -185,7 +192,13 @@ class Tracker:
             self.status = "tracking"
         else:
             self.misses += 1
-            if self.search is not None and self.misses >= self.p.lost_frames:
+            T_pred = self.predict(t)
+            T_lp = None if T_pred is None else T_left_base @ T_pred
+            if T_lp is not None and (T_lp[2, 3] <= 1.0 or min(visible_shares(
+                    T_lp[:3, :3], T_lp[:3, 3], self.alpha, self.model, self.rig)) < self.p.min_visible):
+                self.status = "out_of_view"  # the predicted creature left the view: never a pose
+                self.search = None
+            elif self.search is not None and self.misses >= self.p.lost_frames:
                 self.status = "lost"
                 self.search = None  # next frame re-acquires from the full volume
             elif self.search is not None:
