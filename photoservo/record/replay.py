@@ -422,5 +422,3 @@ def world_from(path: str | Path, config_path: str | Path | None = None, override
     return WorldFrom(p, rec, cfg, tracker_seed(rec) if seed is None else seed, duration, changed)
 
 
-def print_comparison(comparison: Comparison, file: Any = None) -> None:
-    print(str(comparison), file=file or sys.stdout)
