@@ -639,6 +639,7 @@ def run_realtime(cfg: Config, duration_s: float, *, port: str, cameras, model, r
     history = JointHistory(keep_s=2.0, ahead_s=0.01)  # joint states streamed back by the control process
     latest: dict = {}
     result: dict = {}
+    pending: list = []  # the control process's events from before the session's clock (t0) starts
 
     def receive() -> None:
         """Drain the control process's messages: joint states, decisions, events, the result."""
@@ -652,9 +653,12 @@ def run_realtime(cfg: Config, duration_s: float, *, port: str, cameras, model, r
                 _, now, t_state, q, sp_q, sp_dq, T_des, phase, err, yaw, stop_reason, events, quality = msg
                 history.append(t_state, q)
                 latest.update(t=now, phase=phase, err=err, yaw=yaw, stop=stop_reason, link=quality)
-                if recorder is not None:
-                    for t_e, text in events:
-                        recorder.event(t_e - t0, text)  # the controller's clock is monotonic
+                if recorder is not None and t0 is None:  # "ready" came, the clock is about to start
+                    pending.extend(events)
+                elif recorder is not None:
+                    for t_e, text in [*pending, *events]:  # the controller's clock is monotonic
+                        recorder.event(max(t_e - t0, 0.0), text)
+                    pending.clear()
                     if i % 5 == 0:
                         recorder.log_arm(now - t0, q, sp_q, sp_dq)
                         if T_des is not None:
