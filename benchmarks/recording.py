@@ -65,7 +65,7 @@ class Frames:
 def sim_frames(cfg, noise: float) -> Frames:
     """The simulator's frames along its drift, as `track --sim` renders them."""
     from photoservo.robot import pa10
-    from photoservo.servo.session import build_sim
+    from photoservo.sim.run import build_sim
 
     sim = build_sim(cfg)
     T0 = pa10.fk(sim.q0) @ sim.rig.T_flange_left()

@@ -28,7 +28,9 @@ from photoservo.robot import pa10
 from photoservo.sim.emulator import Emulator
 from photoservo.config import load_config
 from photoservo.record.recorder import Recorder
-from photoservo.servo.session import Frame, Scores, _vision_step, build_sim, run_sim_realtime
+from photoservo.servo.scores import Scores
+from photoservo.servo.session import Frame, vision_step
+from photoservo.sim.run import build_sim, run_sim_realtime
 from photoservo.vision.tracker import Tracker
 
 OUT = Path(__file__).resolve().parent / "out" / "track_speed.json"
@@ -54,7 +56,7 @@ def prerendered(cfg, n_frames: int, record: bool) -> dict:
             walls = []
             for fr in frames:
                 c0 = time.perf_counter()
-                _vision_step(fr, tracker, cfg, sc, rec, sim.scene)
+                vision_step(fr, tracker, cfg, sc, rec, sim.truth)
                 walls.append(1e3 * (time.perf_counter() - c0))
         finally:
             if rec is not None:
@@ -82,7 +84,7 @@ def live(cfg, seconds: float, rt_priority: int | None = None) -> dict:
         **{k: float(np.median(v)) for k, v in sc.timings_ms.items() if k != "control_late"},
         "fps": sc.frames / seconds, "frames": sc.frames, "found_ratio": s["found_ratio"],
         "control_late_p50_ms": float(np.percentile(late, 50)), "control_late_p99_ms": float(np.percentile(late, 99)),
-        "control_late_max_ms": float(late.max()), "rms_position_error_mm": s["rms_position_error_mm"],
+        "control_late_max_ms": float(late.max()), "hold_error_rms_mm": s["hold_error_rms_mm"],
         "watchdog": bool(emu.model.watchdog_fired), "faults": s["faults"],
     }
 

@@ -32,7 +32,7 @@ CHILD = r"""
 import json, time
 t0, c0 = time.perf_counter(), time.process_time()
 from photoservo.config import load_config
-from photoservo.servo.session import build_sim
+from photoservo.sim.run import build_sim
 from photoservo.vision.warm import fitness_kernels, kernels_cached, warm_fitness
 cfg = load_config(None, [])
 sim = build_sim(cfg)

@@ -16,7 +16,7 @@ from pathlib import Path
 from typing import Any, Sequence
 
 from photoservo.errors import InputError
-from photoservo.sim.emulator import EmulatorParams
+from photoservo.sim.bridge import EmulatorParams
 from photoservo.robot.link import LinkParams
 from photoservo.tomlconf import build_dataclass, configs_dir, read_toml
 from photoservo.vision.estimator import EstimatorParams

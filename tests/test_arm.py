@@ -6,7 +6,7 @@ import pytest
 
 from photoservo.robot.arm import Arm, JointHistory
 from photoservo.robot.link import Link
-from photoservo.sim.world import LockstepArm
+from photoservo.sim.arm import LockstepArm
 
 
 def test_interpolates_extrapolates_a_little_and_refuses_outside():

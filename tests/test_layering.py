@@ -3,7 +3,11 @@ also those inside functions): data flows one way, so
 
   * vision/ and robot/ reach none of servo/, sim/, record/, cli/ (not even through another
     module, e.g. the application config, which gathers every section);
-  * sim/ stands in for the world with vision/ and robot/: it reaches none of servo/, record/, cli/;
+  * sim/ stands in for the world with vision/ and robot/: its world models reach none of servo/,
+    record/, cli/; only sim/run.py, the harness that runs the product loop on them, imports
+    servo/ (and, like servo/ itself, no record/ or cli/ module);
+  * servo/, the product loop, imports nothing of sim/, record/, cli/ (it reaches the config's
+    sections of those only through the application config);
   * nothing outside cli/ imports cli/.
 """
 
@@ -71,10 +75,15 @@ def _package(m: str) -> str:
     return m.split(".")[1] if m.count(".") >= 1 else ""
 
 
-RULES = {  # package -> packages it must not reach
+RULES = {  # package -> packages it must not reach, directly or through other modules
     "vision": {"servo", "sim", "record", "cli"},
     "robot": {"servo", "sim", "record", "cli"},
     "sim": {"servo", "record", "cli"},
+}
+HARNESS = "photoservo.sim.run"  # the one sim/ module that runs servo/'s loop
+DIRECT = {  # module or package -> packages it must not import directly
+    HARNESS: {"record", "cli"},
+    "servo": {"sim", "record", "cli"},
 }
 
 
@@ -87,10 +96,18 @@ def test_the_graph_is_read(graph):
 def test_lower_packages_reach_no_higher_one(graph, pkg):
     bad = []
     for m in sorted(graph):
-        if _package(m) != pkg:
+        if _package(m) != pkg or m == HARNESS:
             continue
         seen = _reach(graph, m)
         bad += [_chain(seen, m, i) for i in sorted(seen) if _package(i) in RULES[pkg]]
+    assert not bad, "\n".join(bad)
+
+
+@pytest.mark.parametrize("who", sorted(DIRECT))
+def test_the_loop_and_its_harness_import_no_higher_package(graph, who):
+    mods = [m for m in graph if m == who or _package(m) == who]
+    assert mods
+    bad = [f"{m} -> {i}" for m in sorted(mods) for i in sorted(graph[m]) if _package(i) in DIRECT[who]]
     assert not bad, "\n".join(bad)
 
 

@@ -313,8 +313,8 @@ def test_comparison_table_against_hand_computed_numbers(tmp_path: Path):
     m = run_metrics(ra)
     expect = {"frames": 4, "mean_fitness": 0.55, "found_ratio": 0.75, "lost_frames": 1,
               "jitter_mm": 10.0,                      # |30 - 2*10 + 0|
-              "ms_per_frame": 40.0, "commanded_rad": 0.5 + 1.2,
-              "pos_err_mm": math.sqrt(25 / 3),        # errors 0, |(0,-3,-4)| = 5, 0
+              "ms_per_frame": 40.0, "commanded_rad_s": 0.5 + 1.2,
+              "track_err_mm": math.sqrt(25 / 3),        # errors 0, |(0,-3,-4)| = 5, 0
               "heading_err_deg": math.sqrt(100 / 3),  # 0, 0, 10 deg
               "tilt_err_deg": math.sqrt(25 / 3),      # 0, 5, 0 deg
               "size_err_mm": math.sqrt((0 + 1 + 1.5 ** 2) / 3)}
@@ -324,7 +324,7 @@ def test_comparison_table_against_hand_computed_numbers(tmp_path: Path):
     assert table.row("mean_fitness").b == pytest.approx(0.9)
     assert table.row("jitter_mm").b == pytest.approx(14.0)   # z: 400, 407, 428 -> 14
     assert table.row("ms_per_frame").delta == pytest.approx(10.0)
-    assert math.isnan(table.row("pos_err_mm").b) and math.isnan(table.row("commanded_rad").b)
+    assert math.isnan(table.row("track_err_mm").b) and math.isnan(table.row("commanded_rad_s").b)
     text = str(table)
     assert "pose jitter (mm)" in text and "recorded" in text and "replay" in text
     assert text.splitlines()[2].split()[-3:] == ["4", "3", "-1"]   # frames row

@@ -56,7 +56,7 @@ def test_replay_reproduces_the_lockstep_run_and_is_deterministic(recorded: Path,
     ca, cb = a.arm["command"].values, b.arm["command"].values
     assert ca.shape == cb.shape and np.abs(ca - cb).max() < 0.01 * max(1e-3, np.abs(ca).max())
     assert np.abs(a.arm["q"].values - b.arm["q"].values).max() < 1e-9
-    for key in ("mean_fitness", "found_ratio", "jitter_mm", "pos_err_mm", "size_err_mm"):
+    for key in ("mean_fitness", "found_ratio", "jitter_mm", "track_err_mm", "size_err_mm"):
         assert r1.comparison.row(key).delta == 0.0, key
     # the replay's recording is complete (verifies) and replays itself to the same result
     assert verify_rrd(b.path)[0]
@@ -79,7 +79,7 @@ def test_changed_ga_setting_changes_the_table(recorded: Path, tmp_path: Path, ca
     assert t["mean_fitness"]["replay"] != t["mean_fitness"]["recorded"]
     assert t["jitter_mm"]["replay"] != t["jitter_mm"]["recorded"]
     assert t["frames"]["replay"] == t["frames"]["recorded"] == 6
-    assert t["pos_err_mm"]["replay"] is not None           # truth carried over
+    assert t["track_err_mm"]["replay"] is not None           # truth carried over
     cfg = tomllib.loads(read_recording(out).setup.config_toml)
     assert cfg["tracker"]["generations_per_frame"] == 1 and cfg["ga"]["population"] == 12
     assert all(e.generations == 1 for e in read_recording(out).estimates[1:])
@@ -135,7 +135,7 @@ def test_world_from_rebuilds_the_same_world(recorded: Path, tmp_path: Path, caps
     # no --duration, --seed, --set sim.*: all from the recording
     assert main(["track", "--sim", "--world-from", str(recorded), "--record", str(same)]) == 0
     out = capsys.readouterr().out
-    assert "recorded" in out and "this run" in out and "position error" in out and "hold error" in out
+    assert "recorded" in out and "this run" in out and "track error" in out and "hold error" in out
     a, b = read_recording(recorded), read_recording(same)
     assert [_est(e) for e in a.estimates] == [_est(e) for e in b.estimates]   # deterministic
     assert np.array_equal(a.arm["command"].values, b.arm["command"].values)
@@ -351,3 +351,20 @@ def test_sigkill_ten_seconds_into_a_twenty_second_session_leaves_a_replayable_re
                         "--allow-partial", "--json"], capture_output=True, text=True, timeout=900)
     assert r.returncode == 0, r.stderr[-2000:]
     assert json.loads(r.stdout)["frames"] == len(list(iter_frames(path))) >= 1
+
+
+def test_setpoints_are_logged_with_their_units_and_signs(recorded: Path):
+    """arm/setpoint_deg holds joint positions and arm/command_deg_s joint velocities (read back
+    in rad and rad/s): the positions' finite differences over the 50 Hz log agree with the velocities in sign and
+    size, and the positions stay by the measured joints."""
+    r = read_recording(recorded)
+    sq, sd, q = r.arm["setpoint"], r.arm["command"], r.arm["q"]
+    assert set(r.arm) == {"q", "setpoint", "command"}
+    assert np.array_equal(sq.t, sd.t) and np.array_equal(sq.t, q.t)
+    assert np.abs(sq.values - q.values).max() < 0.01           # rad: a period's step from the state
+    v = np.diff(sq.values, axis=0) / np.diff(sq.t)[:, None]    # rad/s
+    mid = 0.5 * (sd.values[1:] + sd.values[:-1])
+    moving = np.abs(mid) > 0.02
+    assert moving.sum() > 10
+    assert np.mean(np.sign(v[moving]) == np.sign(mid[moving])) > 0.95
+    assert np.median(np.abs(v[moving] - mid[moving]) / np.abs(mid[moving])) < 0.2

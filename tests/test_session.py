@@ -12,8 +12,10 @@ from photoservo.robot import protocol as P
 from photoservo.cli.main import main
 from photoservo.config import load_config
 from photoservo.servo.motion import Motion
-from photoservo.servo.session import Controller, build_sim, left_centre, run_lockstep
-from photoservo.sim.world import LockstepArm, TargetMotion, sim_hand_eye
+from photoservo.servo.controller import Controller, left_centre
+from photoservo.sim.arm import LockstepArm
+from photoservo.sim.run import build_sim, run_lockstep
+from photoservo.sim.world import TargetMotion, sim_hand_eye
 from photoservo.sim.scenes import synthetic_rig
 from photoservo.vision.tracker import Track
 
@@ -129,9 +131,9 @@ def test_acceptance_hold_then_collect_on_the_simulators_clock():
     sc = run_lockstep(cfg, 15.0, collect=True, seed=0, settle_s=5.0)
     s = sc.summary()
     assert s["lost_events"] == 0 and s["found_ratio"] == 1.0, s
-    assert len(sc.err_sq) > 250 * 2  # at least 2 s of holding scored
-    assert s["rms_position_error_mm"] <= 10.0, s
-    assert s["rms_yaw_error_deg"] <= 3.0, s
+    assert len(sc.hold_mm) > 250 * 2  # at least 2 s of holding scored
+    assert s["hold_error_rms_mm"] <= 10.0, s
+    assert s["hold_yaw_error_rms_deg"] <= 3.0, s
     assert s["collected"], s
     assert not s["faults"], s
 
@@ -143,7 +145,7 @@ def test_distractor_in_view_never_draws_the_arm():
     assert s["lost_events"] == 0, s
     # the rig centre stays over the target, never over the look-alike 260 mm away
     assert s["distractor_min_mm"] > 150.0, s
-    assert s["rms_position_error_mm"] <= 15.0, s
+    assert s["hold_error_rms_mm"] <= 15.0, s
 
 
 def test_realtime_session_over_a_real_pty_stops_and_disables_the_arm():
@@ -151,7 +153,7 @@ def test_realtime_session_over_a_real_pty_stops_and_disables_the_arm():
     at rest and the servo off, and the control process ran at its rate."""
     from photoservo.sim.emulator_process import EmulatorProcess
     from photoservo.robot.link import Link
-    from photoservo.servo.session import run_sim_realtime
+    from photoservo.sim.run import run_sim_realtime
 
     # the shared test machine can stall a process for a few hundred ms: allow the link 1 s of
     # silence (default 0.25 s) so that the test checks the session's ending, not the machine

@@ -7,7 +7,7 @@ import pytest
 
 from photoservo.robot import pa10
 from photoservo.config import load_config
-from photoservo.servo.session import build_sim
+from photoservo.sim.run import build_sim
 from photoservo.vision.pose_search import GeneSpace
 from photoservo.vision.fitness import stereo_hue
 from photoservo.sim.renderer import Scene
@@ -100,7 +100,7 @@ def test_water_gate_plane_and_tilt():
 def test_creature_drifting_out_of_a_still_arms_view_is_out_of_view_never_a_pose():
     """`track --sim --no-motion`: the creature drifts out of the right image; the tracker says
     out_of_view, and no pose it gave is a false track (more than 50 mm from the truth)."""
-    from photoservo.servo.session import run_lockstep
+    from photoservo.sim.run import run_lockstep
 
     cfg = load_config()
     seen = []

@@ -11,7 +11,7 @@ import numpy as np
 import photoservo
 from photoservo.config import load_config
 from photoservo.robot import pa10
-from photoservo.servo.session import build_sim
+from photoservo.sim.run import build_sim
 from photoservo.servo.warm import warm_start
 from photoservo.vision.fitness import fitness, stereo_hue
 from photoservo.vision.tracker import Tracker
@@ -52,7 +52,7 @@ def test_after_the_warm_start_session_frames_compile_or_load_nothing():
 def test_an_empty_compile_cache_is_seen_before_compiling(tmp_path):
     """With an empty NUMBA_CACHE_DIR (a first run after installing) the kernels are not cached,
     so the session says it compiles; the check itself compiles and writes nothing."""
-    code = ("from photoservo.config import load_config; from photoservo.servo.session import build_sim; "
+    code = ("from photoservo.config import load_config; from photoservo.sim.run import build_sim; "
             "from photoservo.vision.warm import fitness_kernels, kernels_cached; cfg = load_config(); "
             "s = build_sim(cfg); ks = fitness_kernels(cfg.fitness) + s.scene.kernels(); "
             "print(kernels_cached(ks), sum(len(k.signatures) for k in ks))")

@@ -167,7 +167,7 @@ def _move(link: Link, motion: Motion, target: np.ndarray, rec, timeout: float) -
             sp = motion.move_step(s.q, s.dq, target)
             link.send_setpoint(sp.q, sp.dq)
             if rec is not None:
-                rec.log_arm(s.t, s.q, sp.q, sp.q)
+                rec.log_arm(s.t, s.q, sp.q, sp.dq)
             if sp.reason and sp.reason != last_reason:
                 kind = sp.reason.split(" (")[0]
                 reasons[kind] = reasons.get(kind, 0) + 1

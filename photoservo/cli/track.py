@@ -98,21 +98,22 @@ class _StatusLine:
         self.descended = False
         self.drawn = False
 
-    def __call__(self, d: dict) -> None:
-        self.phase = d["phase"]
-        self.descended |= d["phase"] in ("descend", "grasp", "ascend")
-        if not self.show or (not self.tty and d["t"] - self.last < 1.0):
+    def __call__(self, d) -> None:
+        """Show a `servo.session.Status`."""
+        self.phase = d.phase
+        self.descended |= d.phase in ("descend", "grasp", "ascend")
+        if not self.show or (not self.tty and d.t - self.last < 1.0):
             return
-        self.last = d["t"]
-        pos = d.get("position_mm")
+        self.last = d.t
+        pos = d.position_mm
         pos_s = "-" if pos is None else "(" + ", ".join(f"{x:.0f}" for x in pos) + ") mm"
-        rate = _num(d.get("fps"), "4.1f", " fps") if "fps" in d else "lockstep"  # simulated clock: no wall rate
-        phase = "watching" if self.no_motion else d["phase"]
-        line = (f"t {d['t']:5.1f} s | {rate} | {d['status']:<9} fit {_num(d.get('fitness'), '.2f')} | "
-                f"pos {pos_s} | alpha {_num(d.get('alpha'), '.2f')} | "
-                f"err {_num(d.get('error_mm'), '.0f', ' mm')} {_num(d.get('yaw_deg'), '.1f', ' deg')} | {phase}"
-                + (f" | stop: {d['stop']}" if d.get("stop") and not self.no_motion else "")
-                + (f" | {d['link'].text()}" if d.get("link") else ""))
+        rate = _num(d.fps, "4.1f", " fps") if d.fps is not None else "lockstep"  # simulated clock: no wall rate
+        phase = "watching" if self.no_motion else d.phase
+        line = (f"t {d.t:5.1f} s | {rate} | {d.status:<9} fit {_num(d.fitness, '.2f')} | "
+                f"pos {pos_s} | alpha {_num(d.alpha, '.2f')} | "
+                f"err {_num(d.error_mm, '.0f', ' mm')} {_num(d.yaw_deg, '.1f', ' deg')} | {phase}"
+                + (f" | stop: {d.stop}" if d.stop and not self.no_motion else "")
+                + (f" | {d.link.text()}" if d.link else ""))
         self.drawn = True
         if self.tty:
             print("\r" + line[:160].ljust(160), end="", file=sys.stderr, flush=True)
@@ -225,9 +226,9 @@ def _report(args, sc, rec, cfg, status) -> int:
               f"acquisitions {s['acquisitions']}")
         if args.collect:
             print(f"collection: {_collection(s, cfg, status)}")
-        if not math.isnan(s["rms_position_error_mm"]):
-            print(f"hold vs truth (after settling): {s['rms_position_error_mm']:.1f} mm RMS, "
-                  f"{s['rms_yaw_error_deg']:.2f} deg RMS yaw")
+        if not math.isnan(s["hold_error_rms_mm"]):
+            print(f"hold error vs truth (after settling): {s['hold_error_rms_mm']:.1f} mm RMS, "
+                  f"{s['hold_yaw_error_rms_deg']:.2f} deg RMS yaw")
         print("median ms: " + ", ".join(f"{k} {v:.1f}" for k, v in t.items()))
         for f in s["faults"]:
             print(f"fault: {f}")
@@ -249,7 +250,7 @@ def _say(line: str) -> None:
 
 def _run_sim(args, cfg) -> int:
     from photoservo.sim.emulator_process import EmulatorProcess
-    from photoservo.servo.session import build_sim, run_lockstep, run_sim_realtime, sim_config
+    from photoservo.sim.run import build_sim, run_lockstep, run_sim_realtime, sim_config
 
     cfg = sim_config(cfg)  # the recorded config says what the tracker knew: the water plane
     if args.lockstep:  # the recorded effective config then says how the run was clocked (replay reads it)
@@ -294,7 +295,7 @@ def _stopped(args, rec) -> str:
 
 def _run_hardware(args, cfg) -> int:
     from photoservo.fileio import read_image
-    from photoservo.servo.session import ReaderCameras, run_realtime
+    from photoservo.servo.session import run_realtime
     from photoservo.vision.photo_model import build_photo_model
     from photoservo.vision.rig import load_rig
     from photoservo.vision.sources import LatestFrameReader, make_source, source_config
@@ -320,7 +321,8 @@ def _run_hardware(args, cfg) -> int:
             rec = _recorder(args, cfg)
             if rec is not None:
                 _setup_static(rec, cfg, rig, photo, model, args.seed, {})
-            sc = run_realtime(cfg, args.duration, port=args.port, cameras=ReaderCameras(reader), model=model,
+            sc = run_realtime(cfg, args.duration, port=args.port, read_frame=lambda: reader.latest(timeout_s=0.5),
+                              model=model,
                               rig=rig, collect=args.collect, no_motion=args.no_motion, recorder=rec,
                               status=status, seed=args.seed, rt_priority=args.rt_priority, say=_say)
     except KeyboardInterrupt as e:  # Ctrl-C, SIGTERM, SIGHUP: the session stopped the arm in order

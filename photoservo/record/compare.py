@@ -1,7 +1,7 @@
 """Comparing two runs (issue 6): the side-by-side table `photoservo replay` and
 `track --world-from` print — mean fitness, found ratio, pose jitter, lost frames, time per
-frame, commanded motion and, when both runs carry the simulator's ground truth, position /
-heading / tilt / size / hold error. Definitions at `run_metrics`.
+frame, commanded motion and, when both runs carry the simulator's ground truth, track /
+heading / tilt / size / hold error. Definitions at `run_metrics` and servo/scores.py.
 """
 
 from __future__ import annotations
@@ -14,6 +14,7 @@ import numpy as np
 
 from photoservo.errors import InputError
 from photoservo.record.reader import EstimateRecord, Recording, TruthRecord, read_recording
+from photoservo.servo.scores import commanded_motion, hold_error_mm, jitter_mm, rms, track_error_mm
 
 
 def _heading_tilt(T: np.ndarray) -> tuple[float, float]:
@@ -28,27 +29,26 @@ def _wrap(a: float) -> float:
 
 
 def run_metrics(rec: Recording) -> dict[str, float]:
-    """Per-run numbers of the comparison table (NaN when a run lacks the data):
+    """Per-run numbers of the comparison table (NaN when a run lacks the data); the scores
+    (hold error, track error, jitter, commanded motion) are defined in servo/scores.py:
 
     frames            frames logged
     mean_fitness      mean fitness over all estimates that have one
     found_ratio       estimates with found / estimates
     lost_frames       estimates with found = false
-    jitter_mm         RMS of the second difference |p[k+1] - 2 p[k] + p[k-1]| of the estimated
-                      position (base frame when the camera pose was logged) over consecutive
-                      found frames: shake that a constant-velocity drift does not contribute
+    jitter_mm         jitter of the estimated position (base frame when the camera pose was
+                      logged) over consecutive found frames
     ms_per_frame      (t_last - t_first) / (frames - 1) * 1000 on the loop clock
     tracker_ms        mean hue + mean GA time per frame (timing/hue_ms, timing/ga_ms): the
                       processing cost, which a replay changes while its frame times do not
-    commanded_rad     joint-space path length of the commands, sum_k ||c[k] - c[k-1]||_2
-    pos_err_mm        RMS ||p_est - p_true|| (base frame) over found frames with truth
+    commanded_rad_s   commanded motion of the recorded velocity commands (arm/command_deg_s)
+    track_err_mm      RMS track error over found frames with truth
     heading_err_deg   RMS heading difference (model x axis in the base xy plane, wrapped)
     tilt_err_deg      RMS difference of tilt (model z axis from the vertical)
     size_err_mm       RMS over found frames of the mean |size_est - size_true| of the 2 sides
-    hold_err_mm       servo: RMS over frames with truth and a camera pose of the distance from
-                      the rig's centre (midpoint of the optical centres, from T_base_left and the
-                      recorded rig) to where the servo law wants it, [servo] hover_mm straight
-                      above the TRUE target; all frames, the approach included
+    hold_err_mm       RMS hold error over every frame with truth and a camera pose, the approach
+                      included ([servo] hover_mm from the recorded config, the rig from the
+                      recorded rig)
     """
     nan = float("nan")
     est = rec.estimates
@@ -58,12 +58,9 @@ def run_metrics(rec: Recording) -> dict[str, float]:
     m["mean_fitness"] = float(np.mean(fits)) if fits else nan
     m["found_ratio"] = len([e for e in est if e.found]) / len(est) if est else nan
     m["lost_frames"] = float(len([e for e in est if not e.found])) if est else nan
-    d2 = []
-    for a, b, c in zip(found, found[1:], found[2:]):
-        if b.frame == a.frame + 1 and c.frame == b.frame + 1:
-            pa_, pb, pc = (e.T_base_model()[:3, 3] for e in (a, b, c))
-            d2.append(float(np.linalg.norm(pc - 2 * pb + pa_)))
-    m["jitter_mm"] = float(np.sqrt(np.mean(np.square(d2)))) if d2 else nan
+    runs = [(a, b, c) for a, b, c in zip(found, found[1:], found[2:])
+            if b.frame == a.frame + 1 and c.frame == b.frame + 1]
+    m["jitter_mm"] = rms([jitter_mm([e.T_base_model()[:3, 3] for e in r]) for r in runs]) if runs else nan
     ts = [f.t for f in rec.frames]
     m["ms_per_frame"] = (ts[-1] - ts[0]) / (len(ts) - 1) * 1000 if len(ts) > 1 else nan
     if "hue" in rec.timings and "ga" in rec.timings:
@@ -71,20 +68,15 @@ def run_metrics(rec: Recording) -> dict[str, float]:
     else:
         m["tracker_ms"] = nan
     cmd = rec.arm.get("command")
-    m["commanded_rad"] = (float(np.linalg.norm(np.diff(cmd.values, axis=0), axis=1).sum())
-                          if cmd is not None and len(cmd.t) > 1 else nan)
+    m["commanded_rad_s"] = commanded_motion(cmd.values) if cmd is not None else nan
     truth = {tr.frame: tr for tr in rec.truth}
     m.update(_truth_errors(found, truth))
-    m["hold_err_mm"] = _rms(_hold_errors(rec, truth))
+    m["hold_err_mm"] = rms(_hold_errors(rec, truth))
     return m
 
 
-def _rms(v: list[float], scale: float = 1.0) -> float:
-    return float(np.sqrt(np.mean(np.square(v)))) * scale if v else float("nan")
-
-
 def _truth_errors(found: list[EstimateRecord], truth: dict[int, TruthRecord]) -> dict[str, float]:
-    """RMS position, heading, tilt and size errors of found estimates against the truth (see
+    """RMS track, heading, tilt and size errors of found estimates against the truth (see
     `run_metrics`)."""
     pos, head, tilt, size = [], [], [], []
     for e in found:
@@ -92,18 +84,18 @@ def _truth_errors(found: list[EstimateRecord], truth: dict[int, TruthRecord]) ->
         if tr is None:
             continue
         Te, Tt = e.T_base_model(), tr.T_base_target
-        pos.append(float(np.linalg.norm(Te[:3, 3] - Tt[:3, 3])))
+        pos.append(track_error_mm(Te[:3, 3], Tt[:3, 3]))
         (he, te), (ht, tt) = _heading_tilt(Te), _heading_tilt(Tt)
         head.append(_wrap(he - ht))
         tilt.append(te - tt)
         if e.size_mm is not None and tr.size_mm is not None:
             size.append(float(np.mean(np.abs(e.size_mm - tr.size_mm))))
-    return {"pos_err_mm": _rms(pos), "heading_err_deg": _rms(head, 180 / math.pi),
-            "tilt_err_deg": _rms(tilt, 180 / math.pi), "size_err_mm": _rms(size)}
+    return {"track_err_mm": rms(pos), "heading_err_deg": rms(head) * 180 / math.pi,
+            "tilt_err_deg": rms(tilt) * 180 / math.pi, "size_err_mm": rms(size)}
 
 
 def _hold_errors(rec: Recording, truth: dict[int, TruthRecord]) -> list[float]:
-    """Per frame |rig centre - (true target + hover_mm up)| (mm), see run_metrics."""
+    """The hold error (servo/scores.hold_error_mm) of every frame with truth and a camera pose."""
     import tomllib
     try:
         rig = rec.setup.rig()
@@ -112,16 +104,10 @@ def _hold_errors(rec: Recording, truth: dict[int, TruthRecord]) -> list[float]:
         return []
     if rig is None:
         return []
-    from photoservo.servo.session import left_centre
+    from photoservo.servo.controller import left_centre
     centre = left_centre(rig)
-    out = []
-    for f in rec.frames:
-        tr = truth.get(f.index)
-        if tr is None or f.T_base_left is None:
-            continue
-        c = f.T_base_left[:3, :3] @ centre + f.T_base_left[:3, 3]
-        out.append(float(np.linalg.norm(c - tr.T_base_target[:3, 3] - np.array([0.0, 0.0, hover]))))
-    return out
+    return [hold_error_mm(f.T_base_left, centre, truth[f.index].T_base_target[:3, 3], hover)
+            for f in rec.frames if f.index in truth and f.T_base_left is not None]
 
 
 METRICS: tuple[tuple[str, str, str], ...] = (
@@ -132,12 +118,12 @@ METRICS: tuple[tuple[str, str, str], ...] = (
     ("jitter_mm", "pose jitter (mm)", "{:.2f}"),
     ("ms_per_frame", "time per frame (ms)", "{:.1f}"),
     ("tracker_ms", "tracker ms per frame", "{:.1f}"),
-    ("commanded_rad", "commanded motion (rad)", "{:.3f}"),
-    ("pos_err_mm", "position error (mm RMS)", "{:.2f}"),
+    ("commanded_rad_s", "commanded motion (rad/s)", "{:.3f}"),
+    ("track_err_mm", "track error vs truth (mm RMS)", "{:.2f}"),
     ("heading_err_deg", "heading error (deg RMS)", "{:.2f}"),
     ("tilt_err_deg", "tilt error (deg RMS)", "{:.2f}"),
     ("size_err_mm", "size error (mm RMS)", "{:.2f}"),
-    ("hold_err_mm", "hold error vs truth (mm RMS)", "{:.1f}"),
+    ("hold_err_mm", "hold error vs truth, every frame (mm RMS)", "{:.1f}"),
 )
 
 

@@ -17,12 +17,12 @@ Replay (`replay`), from the file alone:
     tracker.generations_per_frame or asks for `fixed_generations`. Either way the replay is
     deterministic: same recording + same config = same result, frame for frame.
   * control, OPEN LOOP: the recorded joint states (arm/q, linearly interpolated between its
-    samples; dq by finite differences) drive a fresh `session.Controller` at the control rate
+    samples; dq by finite differences) drive a fresh `servo.controller.Controller` at the control rate
     ([motion] rate_hz) with the replayed track, which becomes available at capture time +
     [sim] capture_latency_s, as in the lockstep session (for a real-time recording, + the
     frame's recorded hue + GA time, when its track reached the control thread). What it would have commanded is
-    logged as arm/setpoint and arm/command (setpoint.dq, as the session logs it) beside the
-    recorded q. The arm does not move: servo gains change the commands, not the frames, so
+    logged as arm/setpoint_q (rad) and arm/setpoint_dq (rad/s), as the session logs them, beside
+    the recorded q. The arm does not move: servo gains change the commands, not the frames, so
     tune gains closed loop with `track --sim --world-from REC`.
   * keys: a compact recording replays any tracker, GA, estimator, fitness-weight and servo key
     exactly as the full frames would; photo_model.* and the hue keys (`planes.HUE_KEYS`)
@@ -279,6 +279,82 @@ def _tracker_frame(fr: Frame, path: Path) -> tuple[np.ndarray, np.ndarray, Any]:
     return left, right, hue
 
 
+class _ReplayLoop:
+    """One replay: the recorded frames through a fresh tracker (vision side) and the control law
+    open loop on the recorded joint states (control side), both through the product loop's body
+    (servo/session.py: vision_step, control_tick, log_tick)."""
+
+    def __init__(self, setup: ReplaySetup, recorder: Any, progress: Callable[[int, int], None] | None) -> None:
+        from photoservo.servo.scores import Scores
+        from photoservo.servo.session import ControlLoop, controller_for
+        from photoservo.vision.tracker import Tracker
+
+        self.setup, self.cfg, self.rec, self.recorder, self.progress = setup, setup.cfg, setup.recording, recorder, progress
+        self.tracker = Tracker.from_config(setup.model, setup.rig, self.cfg, seed=setup.seed, time_budget=False)
+        self.control = ControlLoop(controller_for(self.cfg, setup.rig), None, Scores())
+        self.rec_gens = {e.frame: e.generations for e in self.rec.estimates}
+        self.truth = {tr.frame: tr for tr in self.rec.truth}
+        self.latency = self.cfg.sim.capture_latency_s
+        self.busy = _processing_delays(self.rec) if not setup.recorded_cfg.sim.lockstep else {}
+        self.frames = _frames_with_meta(setup)
+        self.pending: tuple[Frame, Any] | None = next(self.frames, None)
+        self.track = None
+        self.results: list[FrameResult] = []
+        self.commands: list[np.ndarray] = []
+
+    def deliver(self, upto: float) -> None:
+        """Every recorded frame whose track is available by `upto` (s) through the tracker."""
+        from photoservo.servo.session import Frame as LoopFrame, vision_step
+
+        while self.pending is not None and _available(self.pending[1], self.latency, self.busy) <= upto + 1e-9:
+            fr, m = self.pending
+            t_l, t_r = m.capture_times or (m.t, m.t)
+            n_rec = self.rec_gens.get(fr.index)
+            capped = (self.setup.recorded_generations and n_rec is not None
+                      and 1 <= n_rec < self.cfg.tracker.generations_per_frame)   # (acquiring frames ignore it)
+            left, right, hue = _tracker_frame(fr, self.setup.path)
+            self.recorder.samples = None if self.rec.setup.full_frames else fr.video
+            lf = LoopFrame(fr.index, t_l, t_r, _available(m, self.latency, self.busy), left, right, m.T_base_left)
+            track = vision_step(lf, self.tracker, self.cfg, self.control.scores, self.recorder, None,
+                                self.control.ctrl.events, n_rec if capped else None, hue=hue)
+            tr = self.truth.get(fr.index)
+            if tr is not None:
+                self.recorder.log_truth(fr.index, t_l, tr.T_base_target,
+                                        None if tr.size_mm is None else tuple(tr.size_mm))
+            self.results.append(FrameResult(
+                fr.index, track.status, bool(track.found), float(track.fitness), int(track.generations),
+                None if track.t_left is None else tuple(float(x) for x in track.t_left),
+                None if track.alpha_measured is None else float(track.alpha_measured)))
+            if self.progress is not None:
+                self.progress(len(self.results), len(self.rec.frames))
+            self.track, self.pending = track, next(self.frames, None)
+
+    def run(self) -> None:
+        """Control ticks at the control rate over the recorded joint states (arm/q), frames
+        delivered between them; then the frames after the last joint sample."""
+        from photoservo.servo.session import ARM_LOG_EVERY, control_tick, log_tick
+
+        q_series = self.rec.arm.get("q")
+        if q_series is not None and len(q_series.t):
+            arm = JointHistory.from_samples(q_series.t, q_series.values)
+            dt = 1.0 / self.cfg.motion.rate_hz
+            t_first, t_last = arm.span
+            i0, i1 = math.ceil(t_first / dt - 1e-6), math.floor(t_last / dt + 1e-6)
+            for i in range(i0, i1 + 1):
+                now = i * dt
+                self.deliver(now)
+                q, dq = arm.at(now)
+                tick = control_tick(self.control, now, now, q, dq, self.track)
+                log_tick(self.recorder, tick, i - i0)
+                if (i - i0) % ARM_LOG_EVERY == 0:
+                    self.commands.append(np.array(tick.setpoint_dq))
+        self.deliver(math.inf)   # frames after the last arm sample (or no arm series at all)
+        c = self.control
+        for t_e, text in c.ctrl.events[c.n_events:]:
+            self.recorder.event(t_e, text)
+        c.n_events = len(c.ctrl.events)
+
+
 def replay(setup: ReplaySetup, out: str | Path | None = None, *, view: bool = False,
            progress: Callable[[int, int], None] | None = None, record: bool = True) -> ReplayResult:
     """Re-run the tracker on every recorded frame and the control law open loop on the recorded
@@ -287,98 +363,27 @@ def replay(setup: ReplaySetup, out: str | Path | None = None, *, view: bool = Fa
     it with the recorded run."""
     import tempfile
 
-    from photoservo.robot import pa10
-    from photoservo.servo import session as S
-    from photoservo.servo.motion import Motion
     from photoservo.record.recorder import Recorder
     from photoservo.vision.rig import dump_rig
-    from photoservo.vision.tracker import Tracker
 
     cfg, rec = setup.cfg, setup.recording
-    rig = setup.rig
-    T_fl, centre = rig.T_flange_left(), S.left_centre(rig)
-    tracker = Tracker.from_config(setup.model, rig, cfg, seed=setup.seed, time_budget=False)
-    rec_gens = {e.frame: e.generations for e in rec.estimates}
-    ctrl = S.Controller(cfg.servo, Motion(cfg.motion, pa10.load_limits()), T_fl, centre)
-    truth = {tr.frame: tr for tr in rec.truth}
-    q_series = rec.arm.get("q")
-    arm = JointHistory.from_samples(q_series.t, q_series.values) if q_series is not None and len(q_series.t) else None
-    dt = 1.0 / cfg.motion.rate_hz
-    latency = cfg.sim.capture_latency_s
-    busy = _processing_delays(rec) if not setup.recorded_cfg.sim.lockstep else {}
-    n_total = len(rec.frames)
-    sc = S.Scores()
-    results: list[FrameResult] = []
-    commands: list[np.ndarray] = []
     tmp = None if record else tempfile.TemporaryDirectory(prefix="photoservo-replay-")
     if tmp is not None:
         out = Path(tmp.name) / "replay.rrd"
     recorder = _CopiedVideo(Recorder.from_config(cfg.recording, "replay", out, view=view))
     t_start = time.perf_counter()
     try:
-        recorder.log_static_setup(dump_rig(rig), setup.photo, setup.model, dump_config(cfg),
+        recorder.log_static_setup(dump_rig(setup.rig), setup.photo, setup.model, dump_config(cfg),
                                   rec.setup.seed)   # versions: this software, which replayed it
         recorder.event(rec.frames[0].t, f"replay of {setup.path.name}: {setup.generations_note}")
-        frames = _frames_with_meta(setup)
-        pending: tuple[Frame, Any] | None = next(frames, None)
-        track = None
-        prev_status = None
-        n_events = 0
-
-        def deliver(upto: float) -> None:
-            nonlocal pending, track, prev_status
-            while pending is not None and _available(pending[1], latency, busy) <= upto + 1e-9:
-                fr, m = pending
-                t_l, t_r = m.capture_times or (m.t, m.t)
-                n_rec = rec_gens.get(fr.index)
-                capped = (setup.recorded_generations and n_rec is not None
-                          and 1 <= n_rec < cfg.tracker.generations_per_frame)   # (acquiring frames ignore it)
-                left, right, hue = _tracker_frame(fr, setup.path)
-                recorder.samples = None if setup.recording.setup.full_frames else fr.video
-                sfr = S.Frame(fr.index, t_l, t_r, t_l + latency, left, right, m.T_base_left)
-                track = S._vision_step(sfr, tracker, cfg, sc, recorder, None, n_rec if capped else None, hue=hue)
-                tr = truth.get(fr.index)
-                if tr is not None:
-                    recorder.log_truth(fr.index, t_l, tr.T_base_target,
-                                       None if tr.size_mm is None else tuple(tr.size_mm))
-                results.append(FrameResult(
-                    fr.index, track.status, bool(track.found), float(track.fitness), int(track.generations),
-                    None if track.t_left is None else tuple(float(x) for x in track.t_left),
-                    None if track.alpha_measured is None else float(track.alpha_measured)))
-                if track.status != prev_status:
-                    ctrl.events.append((_available(m, latency, busy), f"track {track.status}"))
-                    prev_status = track.status
-                if progress is not None:
-                    progress(len(results), n_total)
-                pending = next(frames, None)
-
-        if arm is not None:
-            t_first, t_last = arm.span
-            i0 = math.ceil(t_first / dt - 1e-6)
-            i1 = math.floor(t_last / dt + 1e-6)
-            for i in range(i0, i1 + 1):
-                now = i * dt
-                deliver(now)
-                q, dq = arm.at(now)
-                info = ctrl.step(now, q, dq, track)
-                while n_events < len(ctrl.events):
-                    recorder.event(*ctrl.events[n_events])
-                    n_events += 1
-                if (i - i0) % 5 == 0:   # the session logs every 5th control period
-                    recorder.log_arm(now, q, info.setpoint.q, info.setpoint.dq)
-                    commands.append(np.array(info.setpoint.dq))
-                    if info.T_base_cam_des is not None:
-                        recorder.log_desired(now, info.T_base_cam_des)
-        deliver(math.inf)   # frames after the last arm sample (or no arm series at all)
-        while n_events < len(ctrl.events):
-            recorder.event(*ctrl.events[n_events])
-            n_events += 1
+        loop = _ReplayLoop(setup, recorder, progress)
+        loop.run()
     finally:
         recorder.close()
     seconds = time.perf_counter() - t_start
     try:
-        result = ReplayResult(setup, recorder.path if record else None, results,
-                              np.array(commands).reshape(-1, 7), seconds, events=list(ctrl.events))
+        result = ReplayResult(setup, recorder.path if record else None, loop.results,
+                              np.array(loop.commands).reshape(-1, 7), seconds, events=list(loop.control.ctrl.events))
         result.comparison = compare_runs(rec, read_recording(recorder.path), "recorded", "replay")
     finally:
         if tmp is not None:

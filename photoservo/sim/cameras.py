@@ -1,0 +1,132 @@
+"""The simulator's stereo cameras in real time (issue 5, Simulator): a `StereoSource`
+(vision/sources.py) like a camera with its own electronics. A shutter thread exposes a pair at
+the camera rate — the time is the monotonic clock then, the pose where the emulated arm truly is
+(its bridge's joint state) — and a renderer process (its own core) delivers the images while the
+loop works on the previous pair. One exposure is in flight at a time; the loop learns where the
+cameras were from the arm's states, as on hardware.
+"""
+
+from __future__ import annotations
+
+import multiprocessing
+import threading
+import time
+from collections import deque
+from dataclasses import dataclass
+
+import numpy as np
+
+from photoservo.robot import pa10
+from photoservo.robot.clock import ignore_stop_signals, start_child
+from photoservo.sim.world import SimScene
+from photoservo.vision.sources import StereoSource
+
+
+@dataclass(frozen=True)
+class SimCamerasConfig:
+    """The simulated pair's timing (from [sim]): frame rate (Hz), the right camera's exposure
+    delay after the left (s); `read()` gives up after timeout_s."""
+
+    camera_fps: float
+    lr_skew_s: float
+    timeout_s: float = 1.0
+    max_skew_s: float = 1.0
+
+
+def render_process(make_scene, requests, frames) -> None:
+    """The renderer in its own process: builds the scene (`make_scene()`, deterministic from the
+    config) and renders each request (T_base_left, t_left, T_base_left_at_right, t_right) — the
+    order of `SimScene.render`'s arguments, as the shutter sends them — into a stereo pair."""
+    ignore_stop_signals()  # the session stops it
+    scene: SimScene = make_scene()
+    scene.warm()  # compile or load the renderer's kernel before the session's clock starts
+    frames.send(("ready",))
+    while True:
+        try:
+            msg = requests.recv()
+        except (EOFError, OSError):  # the session process is gone
+            return
+        if msg is None:
+            return
+        frames.send(scene.render(*msg))
+
+
+class SimCameras(StereoSource):
+    """See the module docstring. `connect()` starts the renderer process (`make_scene` must be
+    picklable: it runs there), `wait_ready()` waits for it to have warmed its kernel, `start(t0)`
+    starts the exposures (scene time = monotonic time - t0)."""
+
+    def __init__(self, config: SimCamerasConfig, make_scene, emulator, T_flange_left: np.ndarray) -> None:
+        super().__init__(config)
+        self.make_scene, self.emulator, self.T_fl, self.t0 = make_scene, emulator, T_flange_left, 0.0
+        self.period, self.skew = 1.0 / config.camera_fps, config.lr_skew_s
+        self._proc = None
+        self._cond = threading.Condition()
+        self._in_flight: deque[float] = deque()
+        self._stop = False
+        self._shutter = threading.Thread(target=self._expose, name="sim-shutter", daemon=True)
+
+    @property
+    def is_connected(self) -> bool:
+        return self._proc is not None and self._proc.is_alive()
+
+    def connect(self) -> None:
+        ctx = multiprocessing.get_context("spawn")
+        self._req_rx, self._req_tx = ctx.Pipe(duplex=False)
+        self._frm_rx, self._frm_tx = ctx.Pipe(duplex=False)
+        self._proc = ctx.Process(target=render_process, args=(self.make_scene, self._req_rx, self._frm_tx),
+                                 name="photoservo-cameras", daemon=True)
+        start_child(self._proc)  # it compiles or loads its kernel meanwhile: see wait_ready
+
+    def wait_ready(self, timeout_s: float = 300.0) -> None:
+        """Wait until the renderer process has built the scene and warmed its kernel (a first run
+        compiles it: seconds, more on a loaded machine)."""
+        if not self._frm_rx.poll(timeout_s):
+            raise RuntimeError(f"the simulated cameras' renderer did not start within {timeout_s:.0f} s")
+        self._frm_rx.recv()
+
+    def start(self, t0: float) -> None:
+        """Start exposing (after `wait_ready`); scene time is monotonic time minus t0."""
+        self.t0 = t0
+        self._shutter.start()
+
+    def _expose(self) -> None:
+        t_next = time.monotonic()
+        while True:
+            with self._cond:
+                while not self._stop and (self._in_flight or time.monotonic() < t_next):
+                    self._cond.wait(max(0.0, min(0.05, t_next - time.monotonic())) or 0.05)
+                if self._stop:
+                    return
+                t_l = time.monotonic()
+                T_l = pa10.fk(self.emulator.true_state().q) @ self.T_fl
+                self._in_flight.append(t_l)
+            self._req_tx.send((T_l, t_l - self.t0, T_l, t_l + self.skew - self.t0))
+            t_next = max(t_next + self.period, time.monotonic() - self.period)
+
+    def _grab_pair(self) -> tuple[np.ndarray, np.ndarray, float, float] | None:
+        """The next rendered pair (left, right, t_left, t_right), or None after the timeout."""
+        if not self._frm_rx.poll(self.config.timeout_s):
+            return None
+        left, right = self._frm_rx.recv()
+        with self._cond:
+            t_l = self._in_flight.popleft()
+            self._cond.notify_all()
+        return left, right, t_l, t_l + self.skew
+
+    def disconnect(self) -> None:
+        with self._cond:
+            self._stop = True
+            self._cond.notify_all()
+        if self._shutter.is_alive():
+            self._shutter.join(timeout=2.0)
+        if self._proc is None:
+            return
+        try:
+            self._req_tx.send(None)
+        except (OSError, ValueError):
+            pass
+        self._proc.join(timeout=5.0)
+        if self._proc.is_alive():  # it ignores SIGTERM (ignore_stop_signals)
+            self._proc.kill()
+        self._proc = None
