@@ -5,9 +5,9 @@ with the session's own numbers. Every score is "lower is better":
 
   hold   hold error (mm RMS): the rig centre against the desired pose over the TRUE target,
          after settling (the lockstep session's `Scores`, what `track --json` prints as
-         rms_position_error_mm); closed loop only: a replay does not move the arm
+         hold_error_rms_mm); closed loop only: a replay does not move the arm
   track  track error (mm RMS): estimated target position against the truth, found frames
-         (`record.compare.run_metrics` pos_err_mm of the run's recording)
+         (`record.compare.run_metrics` track_err_mm of the run's recording)
   lost   share of frames whose estimate was not found (0..1)
   cpu    tracker time per frame (ms): hue + GA, mean over frames (wall time of the loop's
          vision step; on a loaded machine it carries the load)
@@ -107,7 +107,7 @@ def session_scores(summary: dict) -> dict[str, float]:
     runs), else the median `track --json` prints."""
     frames = summary["frames"]
     t = summary.get("timings_ms_mean") or summary.get("timings_ms_median") or {}
-    hold = summary.get("hold_error_rms_mm", summary.get("rms_position_error_mm"))   # issue 11 renames it
+    hold = summary.get("hold_error_rms_mm")
     return {"hold": float("nan") if hold is None else float(hold),   # strict JSON: null when there is none
             "lost": (frames - round(summary["found_ratio"] * frames)) / frames if frames else float("nan"),
             "cpu": float(t.get("hue", float("nan")) + t.get("ga", float("nan")))}
@@ -116,7 +116,7 @@ def session_scores(summary: dict) -> dict[str, float]:
 def recording_scores(metrics: dict[str, float]) -> dict[str, float]:
     """track, lost, cpu of a run from its recording's `run_metrics` (replay's table)."""
     frames = metrics["frames"]
-    return {"track": float(metrics["pos_err_mm"]),
+    return {"track": float(metrics["track_err_mm"]),
             "lost": metrics["lost_frames"] / frames if frames else float("nan"),
             "cpu": float(metrics["tracker_ms"])}
 
@@ -125,11 +125,7 @@ def _lockstep(cfg: Config, duration_s: float, seed: int, settle_s: float, need_t
     """One closed-loop lockstep run -> scores (recorded to a temporary file for track error)."""
     from photoservo.record.compare import run_metrics
     from photoservo.record.reader import read_recording
-
-    try:   # issue 11 moves the simulator harness from servo/session.py to sim/run.py
-        from photoservo.sim.run import build_sim, run_lockstep
-    except ImportError:
-        from photoservo.servo.session import build_sim, run_lockstep
+    from photoservo.sim.run import build_sim, run_lockstep
 
     sim = build_sim(cfg)
     if not need_track:
