@@ -425,5 +425,3 @@ def world_from(path: str | Path, config_path: str | Path | None = None, override
     else:
         duration = float(rec.frames[-1].t + 1.0 / rec_cfg.sim.camera_fps) if rec.frames else 0.0
     return WorldFrom(p, rec, cfg, tracker_seed(rec) if seed is None else seed, duration, changed)
-
-
