@@ -330,6 +330,14 @@ class _ControlProcess:
                 raise RuntimeError(f"the control process did not start within {timeout_s:.0f} s")
             time.sleep(0.01)
 
+    def send(self, track: Track) -> bool:
+        """Send a track to the control process; False when it has ended already."""
+        try:
+            self.conn.send(track)
+        except (BrokenPipeError, EOFError, OSError):
+            return False
+        return True
+
     def start_clock(self, t0: float) -> None:
         """The session's clock starts at t0 (monotonic s): the control process scores from it."""
         self.t0 = t0
@@ -388,7 +396,8 @@ def run_realtime(cfg: Config, duration_s: float, *, port: str, read_frame: Calla
                 continue
             fr = Frame(got.index, got.t_left - t0, got.t_right - t0, time.monotonic() - t0, got.left, got.right, T_l)
             track = vision_step(fr, tracker, cfg, sc, recorder, truth, events)
-            control.conn.send(replace(track, t=track.t + t0))  # the control process reads monotonic time
+            if not control.send(replace(track, t=track.t + t0)):  # the control process reads monotonic time
+                break  # it has ended (its report says why)
             for t_e, text in events:
                 if recorder is not None:
                     recorder.event(t_e, text)
