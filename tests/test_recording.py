@@ -121,6 +121,52 @@ def test_compact_mode_keeps_the_tracker_planes_exactly_and_a_video(tmp_path: Pat
         assert len(frames) == 6 and frames[0].shape[:2] == (64, 64)   # padded to the encoder's minimum
 
 
+def test_video_fps_keeps_one_frame_per_slot_on_both_cameras_and_every_plane(tmp_path: Path):
+    """[recording] video_fps 10 at 30 fps frames: the video keeps frames 0, 3, 6, ... (the first
+    in each 0.1 s slot, the same on both cameras, decodable), the planes keep every frame."""
+    from photoservo.record.video import decode_samples
+
+    path = tmp_path / "tenhz.rrd"
+    with Recorder.open(path, "track", mode="compact", video="av1", video_fps=10.0) as rec:
+        rec.log_static_setup(dump_rig(default_rig()), None, small_model(), CONFIG_TOML, seed=7)
+        for k in range(10):
+            rec.log_frame(k, 0.001 + k / 30, *frame_pair(k))
+    r = read_recording(path, images=True)
+    assert [f.index for f in r.images] == list(range(10)) and all(f.planes for f in r.images)
+    assert r.setup.run["video_fps"] == 10.0
+    for side in ("left", "right"):
+        samples = [s for f in r.images for s in f.video.get(side, [])]
+        assert [s.frame for s in samples] == [0, 3, 6, 9] and samples[0].keyframe
+        assert len(decode_samples("av1", [s.data for s in samples])) == 4
+    with pytest.raises(InputError, match="video_fps -1"):
+        Recorder.open(tmp_path / "bad.rrd", "track", video_fps=-1.0)
+
+
+def test_a_video_encoder_behind_leaves_frames_out_of_the_video_never_out_of_the_planes(tmp_path: Path):
+    """The video worker held up (as on a machine short of CPU): frames more than VIDEO_LAG_S of
+    loop time after the oldest waiting one are left out of the video and counted in a WARN
+    event; the loop is not held up and every frame's planes are kept."""
+    import threading
+    from photoservo.record.encoding import VIDEO_LAG_S
+
+    path, held = tmp_path / "behind.rrd", threading.Event()
+    with Recorder.open(path, "track", mode="compact", video="av1") as rec:
+        rec.log_static_setup(dump_rig(default_rig()), None, small_model(), CONFIG_TOML, seed=7)
+        rec.encoding.workers["video"].queue.put(held.wait)
+        t0 = time.perf_counter()
+        for k in range(10):
+            rec.log_frame(k, k / 10, *frame_pair(k))
+        assert time.perf_counter() - t0 < 5.0     # the loop went on while the video worker waited
+        held.set()
+    r = read_recording(path, images=True)
+    kept = [k for k in range(10) if k / 10 <= VIDEO_LAG_S]
+    assert [f.index for f in r.images] == list(range(10)) and all(f.planes for f in r.images)
+    for side in ("left", "right"):
+        assert [s.frame for f in r.images for s in f.video.get(side, [])] == kept
+    assert any(f"{10 - len(kept)} frames left out of the watch-only video" in text for _, level, text in r.events
+               if level == "WARN")
+
+
 def test_estimates_arm_timings_events_read_back(tmp_path: Path):
     path = tmp_path / "run.rrd"
     R = np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])

@@ -66,7 +66,7 @@ from photoservo.errors import InputError
 from photoservo.record import layout as L
 from photoservo.record.layout import rr
 from photoservo.record.drawing import Drawing, transform
-from photoservo.record.encoding import FrameEncoding
+from photoservo.record.encoding import VIDEO_LAG_S, FrameEncoding, Worker
 from photoservo.geometry import make_pose
 
 log = logging.getLogger(__name__)
@@ -78,6 +78,8 @@ SPAWN_WAIT_S = 5.0     # longest wait for a spawned viewer to listen
 #: rerun's batcher writes a chunk per entity this often: each chunk carries its ~2 KB schema, so
 #: longer saves space (benchmarks/recording.py); a hard kill loses at most about this much
 BATCH_S = 1.0
+#: frames of per-frame logging the loop may be ahead of the recorder's logging thread before it waits
+DEFERRED_FRAMES = 16
 PREVIEW_WARNING = ("PREVIEW RECORDING: the frames are only a lossy video. This recording is for "
                    "viewing only and CANNOT be replayed.")
 
@@ -88,6 +90,7 @@ class RecordingParams:
 
     mode: Literal["compact", "full", "preview"]  # what of the frames is kept (module docstring)
     video: Literal["av1", "h264", "none"]  # the watch-only video's codec (compact, preview)
+    video_fps: float  # the watch-only video's frame rate (Hz): frames between are not encoded; 0 = every frame
     dir: str  # folder for default recording paths (logs/<timestamp>_<verb>.rrd)
 
     def validate(self, where: str) -> None:
@@ -139,7 +142,7 @@ class Recorder:
     """
 
     def __init__(self, path: Path, verb: str, mode: Mode, video: VideoCodec, view: bool,
-                 connect_url: str | None) -> None:
+                 connect_url: str | None, video_fps: float = 0.0) -> None:
         if mode not in MODES:
             raise InputError(f"recording mode '{mode}': expected one of {', '.join(MODES)}")
         from photoservo.record.video import CODECS
@@ -147,6 +150,8 @@ class Recorder:
             raise InputError(f"recording video '{video}': expected one of {', '.join(CODECS)}")
         if mode == "preview" and video == "none":
             raise InputError("a preview recording is its video: the video codec cannot be 'none'")
+        if not (np.isfinite(video_fps) and video_fps >= 0):
+            raise InputError(f"recording video_fps {video_fps}: expected a rate >= 0 Hz (0 = every frame)")
         self.path = Path(path)
         self.verb, self.mode, self.video = verb, mode, video
         self.replayable = mode != "preview"
@@ -158,7 +163,8 @@ class Recorder:
         self._started = self._closed = False
         self._last_t = 0.0
         self.frames_logged = 0
-        self.encoding = None if mode == "full" else FrameEncoding(self, mode == "compact", video)
+        self._deferred = Worker("recorder-log", DEFERRED_FRAMES)   # the loop's logging (module docstring)
+        self.encoding = None if mode == "full" else FrameEncoding(self, mode == "compact", video, video_fps)
         self.draw = Drawing(self)
         self._log_static("world", rr.ViewCoordinates.RIGHT_HAND_Z_UP)
         self.draw.point_styles()
@@ -175,11 +181,12 @@ class Recorder:
     @classmethod
     def open(cls, path: str | Path | None, verb: str, *, mode: Mode = "compact",
              video: VideoCodec = "av1", view: bool = False, connect_url: str | None = None,
-             logs_dir: str | Path = "logs") -> Recorder:
+             logs_dir: str | Path = "logs", video_fps: float = 0.0) -> Recorder:
         """Start a recording (the file itself appears at the first frame or arm sample).
 
         path: the `.rrd` to write (must not exist); None -> `default_path(verb, logs_dir)`.
-        mode: 'compact', 'full' or 'preview' (module docstring); video: its codec.
+        mode: 'compact', 'full' or 'preview' (module docstring); video: its codec; video_fps:
+        the video's frame rate (Hz; 0 = every frame logged).
         view: spawn a viewer and stream to it while writing the file (returns at once).
         connect_url: stream to a running viewer (`rerun+http://host:9876/proxy`) as well.
         """
@@ -192,7 +199,7 @@ class Recorder:
             p.parent.mkdir(parents=True, exist_ok=True)
         except OSError as e:
             raise InputError(f"{p.parent}: cannot create the recording folder ({e.strerror})") from None
-        return cls(p, verb, mode, video, view, connect_url)
+        return cls(p, verb, mode, video, view, connect_url, video_fps)
 
     @classmethod
     def from_config(cls, params: RecordingParams, verb: str, path: str | Path | None = None, *,
@@ -200,7 +207,7 @@ class Recorder:
         """`open` with the [recording] config (mode, video, dir); `path` overrides the default
         `<dir>/<UTC time>_<verb>.rrd`."""
         return cls.open(path, verb, mode=params.mode, video=params.video, view=view,
-                        connect_url=connect_url, logs_dir=params.dir)
+                        connect_url=connect_url, logs_dir=params.dir, video_fps=params.video_fps)
 
     def __enter__(self) -> Self:
         return self
@@ -225,6 +232,7 @@ class Recorder:
             return
         self._closed = True
         try:
+            self._deferred.stop()
             if self.encoding is not None:
                 self.encoding.close()
         finally:
@@ -232,6 +240,12 @@ class Recorder:
                 try:
                     if self._preview_event_due and self._started:
                         self._log(L.E_EVENTS, self._last_t, None, rr.TextLog(PREVIEW_WARNING, level="WARN"))
+                    dropped = 0 if self.encoding is None else self.encoding.video_dropped
+                    if dropped and self._started:
+                        self._log(L.E_EVENTS, self._last_t, None, rr.TextLog(
+                            f"{dropped} frames left out of the watch-only video: its encoder was "
+                            f"more than {VIDEO_LAG_S:g} s behind (short of CPU); the planes kept every frame",
+                            level="WARN"))
                     self.draw.close()
                 finally:
                     if self._started:
@@ -243,7 +257,7 @@ class Recorder:
         self._raise_worker_error()
 
     def _raise_worker_error(self) -> None:
-        error = None if self.encoding is None else self.encoding.error
+        error = self._deferred.error or (None if self.encoding is None else self.encoding.error)
         if error is not None:
             raise RuntimeError(f"recording to {self.path} failed: {error}") from error
 
@@ -293,6 +307,12 @@ class Recorder:
         if self._closed:
             raise RuntimeError(f"recording to {self.path} is closed")
 
+    def _defer(self, fn: Any, *args: Any) -> None:
+        """Run fn(*args) on the recorder's logging thread, in call order: a rerun call costs
+        the calling thread its GIL at every entry and exit, which beside the control-link and
+        encoding threads cost the session loop 20-50 ms a frame here (measured in `track`)."""
+        self._deferred.queue.put(lambda: fn(*args))
+
     def _log_static(self, entity: str, *parts: Any) -> None:
         with self._lock:
             self._rec.log(entity, *parts, static=True)
@@ -309,6 +329,7 @@ class Recorder:
         from photoservo.record import planes
         return {"format": L.FORMAT_VERSION, "verb": self.verb, "mode": self.mode,
                 "video": self.video if self.mode != "full" else None,
+                "video_fps": self.encoding.video_fps if self.encoding is not None else None,
                 "replayable": self.replayable, "full_frames": self.mode == "full",
                 "seed": dict(seed) if isinstance(seed, Mapping) else seed,
                 "versions": dict(versions or software_versions()),
@@ -368,20 +389,30 @@ class Recorder:
         self._check()
         self._start()
         self._last_t = t
+        left, right = _bgr(left_bgr).copy(), _bgr(right_bgr).copy()
+        T = None if T_base_left is None else np.array(T_base_left, dtype=np.float64)
+        if fitness_input is not None and self.mode == "compact":
+            from photoservo.record.encoding import copied
+            fitness_input = copied(fitness_input)
+        self._defer(self._frame_now, frame, t, left, right, T, capture_times, fitness_input, video)
+        self.frames_logged += 1
+
+    def _frame_now(self, frame: int, t: float, left: np.ndarray, right: np.ndarray, T_base_left: np.ndarray | None,
+                   capture_times: tuple[float, float] | None, fitness_input: Any, video: Mapping[str, list] | None) -> None:
+        """`log_frame`'s logging, on the recorder's logging thread (the frames are copies)."""
         if self._preview_event_due:
             self._preview_event_due = False
-            self.event(t, PREVIEW_WARNING, level="WARN")
+            self._log(L.E_EVENTS, t, None, rr.TextLog(PREVIEW_WARNING, level="WARN"))
         self.draw.tick(t)
         if T_base_left is not None:
             self._log("world/rig", t, frame, transform(T_base_left))
         self._log(L.E_DATA_FRAME, t, frame, rr.AnyValues(values=L.pack(L.FRAME_LAYOUT, {
             "capture_times": capture_times, "T_base_left": T_base_left})))
         if self.mode == "full":
-            for side, img in (("left", left_bgr), ("right", right_bgr)):
-                self._log(L.E_IMAGE[side], t, frame, rr.Image(_bgr(img), color_model="BGR"))
+            for side, img in (("left", left), ("right", right)):
+                self._log(L.E_IMAGE[side], t, frame, rr.Image(img, color_model="BGR"))
         else:
-            self.encoding.queue(frame, t, _bgr(left_bgr).copy(), _bgr(right_bgr).copy(), fitness_input, video)
-        self.frames_logged += 1
+            self.encoding.queue(frame, t, left, right, fitness_input, video)
 
     def log_estimate_of(self, frame: int, t: float, estimate: Any, *,
                         T_base_left: np.ndarray | None = None, projection: Any = None) -> None:
@@ -406,6 +437,14 @@ class Recorder:
         self._check()
         self._start()
         self._last_t = t
+        own = (lambda a: None if a is None else np.array(a, dtype=np.float64))
+        self._defer(self._estimate_now, frame, t, found, fitness, own(R), own(position_mm), alpha, size_mm,
+                    generations, own(T_base_left), projection)
+
+    def _estimate_now(self, frame: int, t: float, found: bool, fitness: float | None, R: np.ndarray | None,
+                      position_mm: np.ndarray | None, alpha: float | None, size_mm: tuple[float, float] | None,
+                      generations: int, T_base_left: np.ndarray | None, projection: Any) -> None:
+        """`log_estimate`'s logging, on the recorder's logging thread (the arrays are copies)."""
         if fitness is not None:
             self.draw.queue_scalar("plots/fitness", t, frame, float(fitness))
         self.draw.queue_scalar("plots/found", t, frame, 1.0 if found else 0.0)
@@ -413,8 +452,8 @@ class Recorder:
         if posed:
             if alpha is not None:
                 self.draw.queue_scalar("plots/alpha", t, frame, float(alpha))
-            T_model = make_pose(np.asarray(R, dtype=np.float64), np.asarray(position_mm, dtype=np.float64))
-            T_base_model = T_model if T_base_left is None else np.asarray(T_base_left) @ T_model
+            T_model = make_pose(R, position_mm)
+            T_base_model = T_model if T_base_left is None else T_base_left @ T_model
             self.draw.box("world/target/estimate", t, frame, T_base_model, size_mm, [255, 140, 0])
         else:
             self._log("world/target/estimate", t, frame, rr.Clear(recursive=False))
@@ -430,7 +469,9 @@ class Recorder:
         """Simulation ground truth: the target's model frame in the base frame (4x4, mm)."""
         self._check()
         self._start()
-        T = np.asarray(T_base_target, dtype=np.float64)
+        self._defer(self._truth_now, frame, t, np.array(T_base_target, dtype=np.float64), size_mm)
+
+    def _truth_now(self, frame: int, t: float, T: np.ndarray, size_mm: tuple[float, float] | None) -> None:
         self.draw.box("world/target/truth", t, frame, T, size_mm, [0, 200, 255])
         self._log(L.E_DATA_TRUTH, t, frame, rr.AnyValues(values=L.pack(L.TRUTH_LAYOUT, {
             "T_base_target": T, "size_mm": size_mm})))

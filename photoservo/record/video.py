@@ -9,6 +9,10 @@ the video. PyAV (FFmpeg's encoders) does the encoding:
   h264  x264, ultrafast, zerolatency, CRF 28, Annex B: ~40 % less CPU than av1 here, but the
         native viewer decodes H.264 through an `ffmpeg` executable it needs on the PATH.
 
+PyAV holds the GIL while it encodes (a thread encoding AV1 beside a Python loop halved that
+loop's speed here), so a recorder encodes in a child process (`EncoderProcess`): the session's
+loop keeps its interpreter to itself.
+
 Lossy: the video is for watching. Replay reads the tracker's planes (`record.planes`) or full
 frames, never the video. Keyframes every GOP_S seconds (the viewer decodes from the previous
 one when it seeks); no B-frames (VideoStream does not take them).
@@ -16,6 +20,7 @@ one when it seeks); no B-frames (VideoStream does not take them).
 
 from __future__ import annotations
 
+import multiprocessing
 import os
 from dataclasses import dataclass
 from fractions import Fraction
@@ -99,3 +104,82 @@ def decode_samples(codec: str, samples: list[bytes]) -> list[np.ndarray]:
     for f in cc.decode(None):
         out.append(f.to_ndarray(format="bgr24"))
     return out
+
+
+class EncoderProcess:
+    """`VideoEncoder`s, one per camera side, in a child process: frames go down a pipe as raw
+    bytes, samples come back. Not thread-safe: one caller thread (the recorder's video worker).
+    The child ignores the stop signals (the session stops it through `close`) and exits when the
+    pipe closes, so a killed session leaves no encoder behind."""
+
+    def __init__(self, codec: str, fps: float) -> None:
+        from photoservo.robot.clock import start_child
+
+        if codec not in ENCODERS:
+            raise ValueError(f"video codec '{codec}': expected one of {', '.join(ENCODERS)}")
+        ctx = multiprocessing.get_context("spawn")
+        self._conn, child = ctx.Pipe()
+        self._proc = ctx.Process(target=_serve, args=(child, codec, fps), name="recorder-video", daemon=True)
+        start_child(self._proc)
+        child.close()
+
+    def encode(self, side: str, bgr: np.ndarray, frame: int) -> list[Sample]:
+        """`VideoEncoder.encode` of this side's encoder (made at its first frame)."""
+        img = np.ascontiguousarray(bgr, np.uint8)
+        self._conn.send(("encode", side, frame, img.shape))
+        self._conn.send_bytes(memoryview(img).cast("B"))
+        return self._answer()
+
+    def flush(self, side: str) -> list[Sample]:
+        """`VideoEncoder.flush` of this side's encoder (nothing if it never had a frame)."""
+        self._conn.send(("flush", side))
+        return self._answer()
+
+    def close(self) -> None:
+        """Stop the child (it has flushed nothing on its own: `flush` each side first)."""
+        try:
+            self._conn.send(("stop",))
+        except OSError:
+            pass
+        self._proc.join(timeout=10.0)
+        if self._proc.is_alive():
+            self._proc.kill()
+            self._proc.join()
+        self._conn.close()
+
+    def _answer(self) -> list[Sample]:
+        try:
+            kind, value = self._conn.recv()
+        except EOFError:
+            raise RuntimeError(f"the video encoder process ended (exit code {self._proc.exitcode})") from None
+        if kind == "error":
+            raise RuntimeError(f"video encoder: {value}")
+        return value
+
+
+def _serve(conn, codec: str, fps: float) -> None:
+    """The child of `EncoderProcess`: encode what the pipe brings until 'stop' or EOF."""
+    from photoservo.robot.clock import ignore_stop_signals
+
+    ignore_stop_signals()
+    encoders: dict[str, VideoEncoder] = {}
+    while True:
+        try:
+            msg = conn.recv()
+        except EOFError:
+            return
+        if msg[0] == "stop":
+            return
+        try:
+            if msg[0] == "encode":
+                _, side, frame, shape = msg
+                img = np.frombuffer(conn.recv_bytes(), np.uint8).reshape(shape)
+                enc = encoders.get(side)
+                if enc is None:
+                    enc = encoders[side] = VideoEncoder(codec, shape[1], shape[0], fps)
+                conn.send(("samples", enc.encode(img, frame)))
+            else:
+                enc = encoders.get(msg[1])
+                conn.send(("samples", enc.flush() if enc is not None else []))
+        except Exception as e:  # noqa: BLE001 - reported to the parent, which raises it
+            conn.send(("error", f"{type(e).__name__}: {e}"))
