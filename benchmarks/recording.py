@@ -1,6 +1,7 @@
 """Recording cost and replay fidelity per recording mode (issue 13): 640x480 stereo at 30 fps.
 
-Size and cost: for each mode (compact with an AV1 / H.264 / no video, full, preview) and three
+Size and cost: for each mode (compact with an AV1 video of 10 or 30 frames a second ([recording]
+video_fps 10 or 0), an H.264 one, none; full; preview) and three
 kinds of frames — the simulator as `track --sim` sees it (the renderer's water scene, cameras
 following the drift), the same with 2.5 DN sensor noise, and the second generator's harbour
 scenes 0-2 (`sim/harbour.py`: its own water, light, foam and 2-6 DN noise; fresh 2 DN noise per
@@ -12,7 +13,8 @@ points, truth, timings, 17 arm samples of the control loop), and reports:
   MB/min      file size per minute of 30 fps stereo
   loop ms     median time per frame the loop spends in the recorder's calls (compact and
               preview encode on worker threads: the loop copies and queues)
-  cpu ms      CPU time of the whole process per frame (workers and rerun's writer included):
+  cpu ms      CPU time per frame of the process and its video encoder process (workers and
+              rerun's writer included):
               what recording really costs on a loaded machine
   encode ms   worker time per frame spent encoding planes and video (wall, both workers)
 
@@ -32,6 +34,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import resource
 import statistics
 import tempfile
 import time
@@ -47,7 +50,9 @@ from photoservo.vision.fitness import project_model, stereo_hue
 
 FPS = 30.0
 DISTINCT = 45   # distinct stereo frames per kind (1.5 s), cycled
-MODES = (("compact", "av1"), ("compact", "h264"), ("compact", "none"), ("full", "none"), ("preview", "av1"))
+#: (mode, video, video_fps): the default first ([recording] compact, av1 at 10 Hz)
+MODES = (("compact", "av1", 10.0), ("compact", "av1", 0.0), ("compact", "h264", 10.0), ("compact", "none", 0.0),
+         ("full", "none", 0.0), ("preview", "av1", 10.0))
 KEYS = ["ga.population=12", "tracker.generations_per_frame=3", "tracker.gain_position=0.5",
         "estimator.min_contrast=0.6", "fitness.w_outer_mismatch=0.7", "servo.k_position=0.3"]
 
@@ -94,16 +99,22 @@ def harbour_frames(cfg, seed: int) -> Frames:
     return Frames(f"harbour {seed}", pairs, build_photo_model(sc.photo, cfg.photo_model), sc.rig, cfg)
 
 
-def run_once(fr: Frames, mode: str, video: str, n: int, folder: Path, cfg) -> dict:
+def _cpu_s() -> float:
+    """CPU seconds of this process and its ended children (the video encoder process)."""
+    ch = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return time.process_time() + ch.ru_utime + ch.ru_stime
+
+
+def run_once(fr: Frames, mode: str, video: str, n: int, folder: Path, cfg, video_fps: float = 0.0) -> dict:
     from photoservo.sim.scenes import synthetic_rig
     from photoservo.tomlconf import dump_config
     from photoservo.vision.rig import dump_rig
 
-    path = folder / f"bench_{mode}_{video}.rrd"
+    path = folder / f"bench_{mode}_{video}_{video_fps:g}.rrd"
     loop = []
     T = np.eye(4)
-    c0, t0 = time.process_time(), time.perf_counter()
-    with Recorder.open(path, "bench", mode=mode, video=video) as rec:
+    c0, t0 = _cpu_s(), time.perf_counter()
+    with Recorder.open(path, "bench", mode=mode, video=video, video_fps=video_fps) as rec:
         rec.log_static_setup(dump_rig(synthetic_rig()), None, fr.model, dump_config(cfg), seed=0)
         for k in range(n):
             j = k % len(fr.pairs)
@@ -118,7 +129,7 @@ def run_once(fr: Frames, mode: str, video: str, n: int, folder: Path, cfg) -> di
             rec.log_timings(t, {"hue": 10.0, "ga": 40.0, "record": 2.0}, frame=k)
             loop.append(time.perf_counter() - t1)
             time.sleep(max(0.0, t0 + (k + 1) / FPS - time.perf_counter()))
-    cpu = time.process_time() - c0
+    cpu = _cpu_s() - c0
     size = path.stat().st_size
     enc = rec.encoding.encode_s if rec.encoding is not None else 0.0
     path.unlink()
@@ -133,20 +144,27 @@ def size_table(n: int, repeats: int) -> list[dict]:
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
         for fr in kinds:
-            for mode, video in MODES:
-                runs = [run_once(fr, mode, video, n, Path(tmp), cfg) for _ in range(repeats)]
-                rows.append({"frames": fr.name, "mode": mode, "video": video,
+            for mode, video, vfps in MODES:
+                runs = [run_once(fr, mode, video, n, Path(tmp), cfg, vfps) for _ in range(repeats)]
+                rows.append({"frames": fr.name, "mode": mode, "video": video, "video_fps": vfps,
                              **{k: statistics.median(r[k] for r in runs) for k in runs[0]}})
-                print(f"  {fr.name:14s} {mode:8s} {video:5s} {rows[-1]['mb_per_min']:7.0f} MB/min", flush=True)
+                print(f"  {fr.name:14s} {mode:8s} {_video(video, vfps):9s} {rows[-1]['mb_per_min']:7.0f} MB/min",
+                      flush=True)
         # rerun's batcher period: a chunk per entity per period, each with its ~2 KB schema
         saved = recorder_module.BATCH_S
         try:
             recorder_module.BATCH_S = 0.2
-            r = run_once(kinds[0], "compact", "av1", n, Path(tmp), cfg)
+            r = run_once(kinds[0], "compact", "av1", n, Path(tmp), cfg, 10.0)
         finally:
             recorder_module.BATCH_S = saved
-        rows.append({"frames": kinds[0].name, "mode": "compact", "video": "av1", "note": "BATCH_S=0.2", **r})
+        rows.append({"frames": kinds[0].name, "mode": "compact", "video": "av1", "video_fps": 10.0,
+                     "note": "BATCH_S=0.2", **r})
     return rows
+
+
+def _video(video: str, video_fps: float) -> str:
+    """'av1@10' for a video at 10 Hz, 'av1@30' for every frame, 'none'."""
+    return video if video == "none" else f"{video}@{video_fps or FPS:g}"
 
 
 def _key(f) -> tuple:
@@ -206,9 +224,9 @@ def main() -> int:
     load1 = os.getloadavg()[0]
     print(f"\nRecording 640x480 stereo @ {FPS:.0f} fps, {args.frames} frames x {args.repeats} runs (median); "
           f"{os.cpu_count()} CPUs shared, load average {load0:.1f} -> {load1:.1f}")
-    print(f"{'frames':15s} {'mode':8s} {'video':5s} {'MB/min':>7s} {'loop ms':>8s} {'p90':>6s} {'cpu ms':>7s} {'enc ms':>7s}")
+    print(f"{'frames':15s} {'mode':8s} {'video':9s} {'MB/min':>7s} {'loop ms':>8s} {'p90':>6s} {'cpu ms':>7s} {'enc ms':>7s}")
     for r in sizes:
-        print(f"{r['frames']:15s} {r['mode']:8s} {r['video']:5s} {r['mb_per_min']:7.0f} {r['loop_ms']:8.2f} "
+        print(f"{r['frames']:15s} {r['mode']:8s} {_video(r['video'], r['video_fps']):9s} {r['mb_per_min']:7.0f} {r['loop_ms']:8.2f} "
               f"{r['loop_p90_ms']:6.2f} {r['cpu_ms']:7.1f} {r['encode_ms']:7.1f}" + (f"  ({r['note']})" if "note" in r else ""))
     if fidelity:
         print(f"\nReplay fidelity: lockstep session {args.duration:g} s at {args.fps:g} fps, replayed with "
