@@ -116,3 +116,23 @@ def test_many_hued_creature_with_the_waters_hue_is_found():
     assert est.found
     t = np.array(sc.truth["position_mm"])
     assert np.linalg.norm(est.position_mm - t) < 0.05 * t[2]
+
+
+def test_silhouette_peak_finds_the_shape_inside_a_larger_region_of_its_hue():
+    """A 60 x 20 px bar of weight 1 on a background of weight 0, beside a 200 x 120 px block of
+    weight 1 (a larger region of the same hue): the bar's silhouette fits the bar at its size and
+    heading; inside the block a template of any size scores ~0 (its ring is covered too)."""
+    from photoservo.vision.silhouette import silhouette_peaks
+
+    weight = np.zeros((240, 480), np.float32)
+    weight[30:150, 250:450] = 1.0  # the larger region
+    weight[100:120, 40:100] = 1.0  # the bar, horizontal
+    mask = np.zeros((30, 90), np.uint8)
+    mask[5:25, 15:75] = 255  # the photo: a bar 60 x 20 px
+    peaks = silhouette_peaks(weight, mask, np.geomspace(20, 200, 11))
+    u, v, area, psi, score, side = peaks[0]
+    assert abs(u - 69.5) < 4 and abs(v - 109.5) < 4
+    assert 0.7 < area / 1200 < 1.4
+    assert min(psi, np.pi - psi) < np.radians(16)
+    assert score > 0.6  # a perfect fit scores 1 (a little less on the shrunk image)
+    assert all(not (250 < p[0] < 450 and 30 < p[1] < 150) or p[4] < 0.5 * score for p in peaks)

@@ -13,6 +13,12 @@ way to a perfect score,
 
 and found = contrast >= min_contrast, beside the outline check (few outer points on target hue).
 A brighter, darker or colour-cast copy of a pair moves S and q together.
+
+Candidates of different scales are compared by their `standing`: the same formula against what
+a search of the whole pair at the candidate's scale would find where the creature is not — the
+null's (1 - 1/n) quantile, n the number of places the model fits in the image without overlap
+(`placements`). A model shrunk to a few pixels fits thousands of places and some small spot of
+its colour somewhere; the creature's own scale fits a few dozen.
 """
 
 from __future__ import annotations
@@ -90,6 +96,15 @@ def null_scores(c: Candidate, model: PhotoModel, frame: StereoHue, rig: Rig, fit
     return f.reshape(-1, jitters).max(axis=1), outer_share(R, pos, alpha, model, frame, rig, fit_params)
 
 
+def placements(c: Candidate, model: PhotoModel, rig: Rig) -> float:
+    """How many places of the left image a search could try the candidate's model at without
+    overlap (>= 1): the image's area over the model's apparent area (its mask at the candidate's
+    apparent scale fx / (alpha z))."""
+    s = float(rig.left.K[0, 0]) / (c.alpha * float(np.asarray(c.position_mm)[2]))
+    area = float(np.count_nonzero(model.mask)) * s * s
+    return max(1.0, rig.left.width * rig.left.height / max(area, 1.0))
+
+
 def outer_share(R: np.ndarray, t: np.ndarray, alpha: np.ndarray, model: PhotoModel, frame: StereoHue, rig: Rig,
                 fit_params: FitnessParams) -> np.ndarray:
     """(P,): the largest share, over the two cameras, of outer points S_out on target hue."""
@@ -114,7 +129,9 @@ class Detection:
     confidence = logistic((contrast - min_contrast) / confidence_scale)
                  · logistic((max_outer_on_target - outer_on_target) / 0.02).
     `threshold`: the detection score that would just pass in this pair (the tracker's per-frame
-    test)."""
+    test). `standing`: (score - q_b) / (1 - q_b) with q_b the null's (1 - 1/n) quantile (at
+    least its median), n = `placements` (module docstring): how the candidate compares with the
+    best a search of this pair at its scale finds elsewhere; candidates are ranked by it."""
 
     score: float
     null_level: float
@@ -123,6 +140,7 @@ class Detection:
     passed: bool
     confidence: float
     threshold: float
+    standing: float
 
 
 def detect(c: Candidate, model: PhotoModel, frame: StereoHue, rig: Rig, fit_params: FitnessParams,
@@ -137,7 +155,9 @@ def detect(c: Candidate, model: PhotoModel, frame: StereoHue, rig: Rig, fit_para
     q = float(np.median(null)) if len(null) else 0.0
     q = min(q, 0.99)
     contrast = (score - q) / (1.0 - q)
+    qb = min(float(np.quantile(null, 1.0 - 1.0 / placements(c, model, rig))) if len(null) else 0.0, 0.99)
+    standing = (score - max(q, qb)) / (1.0 - max(q, qb))
     passed = contrast >= p.min_contrast and outer <= p.max_outer_on_target
     conf = confidence(contrast, p) / (1.0 + math.exp(-(p.max_outer_on_target - outer) / 0.02))
     return Detection(score=score, null_level=q, contrast=contrast, outer_on_target=outer, passed=bool(passed),
-                     confidence=conf, threshold=q + p.min_contrast * (1.0 - q))
+                     confidence=conf, threshold=q + p.min_contrast * (1.0 - q), standing=standing)

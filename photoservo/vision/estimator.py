@@ -10,9 +10,16 @@ Each pair seeds one GA island searching a window around it; an optional unseeded
 searches the whole volume. Every island stops when converged (`Convergence`), then tries the
 pose's look-alike twins (planar-ambiguity mirror, heading + 180 deg). Each island's best is a
 candidate, tested by `detect` (`Detection`: the fitness with the cameras combined by their
-minimum — both must see it — against the threshold calibrated on empty and look-alike scenes in
-benchmarks/accuracy.py, and the outline check: few outer points on target hue); the best passing
-candidate is the estimate, the others the candidate list, and `found` is whether one passed.
+minimum — both must see it — against the pair's own null, and the outline check: few outer points
+on target hue). The candidate that stands out most from what a search of this pair finds
+elsewhere at its scale (`Detection.standing`) is the estimate, the others the candidate list,
+and `found` is whether it passed (a fit on a small spot of the target's colour may pass while
+the creature itself stands out more: then the creature is the estimate, or nothing is).
+
+When the target's hues cover most of the pair (a many-hued creature in water of one of its hues;
+a real scene whose background lies within the hue tolerance of the target), seeds come from the
+hue layout (`vision/hue_layout.py`) and from the photo's silhouette on the hues the creature
+holds more of than the frame does (`vision/silhouette.py`), alternately.
 """
 
 from __future__ import annotations
@@ -33,6 +40,7 @@ from photoservo.vision.photo_model import HUE_BINS, PhotoModel
 from photoservo.vision.pose_search import Candidate, PoseSearch
 from photoservo.vision.rig import Rig
 from photoservo.vision.seeding import ModelShape, blob_pairs, group_pairs, seed_genes
+from photoservo.vision.silhouette import silhouette_pairs
 
 
 @dataclass(frozen=True)
@@ -155,7 +163,11 @@ def _islands(model: PhotoModel, rig: Rig, frame: StereoHue, ga_params: GAParams,
         if len(hued) and float(np.mean(model.target_hues[hued])) > p.layout_share:
             # the creature's hues are everywhere (a many-hued creature, the water's hue among its
             # own): seed from where the photo's hue layout agrees (vision/hue_layout.py)
-            pairs = layout_pairs(frame.left, frame.right, model, shape.area, rig, p)
+            # and from where the photo's silhouette fits the hues the creature holds more of
+            # than the frame does (vision/silhouette.py), alternately
+            both = (silhouette_pairs(frame.left, frame.right, model, rig, p),
+                    layout_pairs(frame.left, frame.right, model, shape.area, rig, p))
+            pairs = [bp for k in range(max(map(len, both))) for src in both for bp in src[k:k + 1]]
         else:
             pairs = blob_pairs(frame.left, frame.right, model, rig, p)
             # groups of pieces (a creature split by foam) beside the single blobs, largest first
@@ -204,7 +216,7 @@ def estimate(model: PhotoModel, left_bgr: np.ndarray, right_bgr: np.ndarray, rig
         evaluations += search.ga.evaluations
         if np.isfinite(c.fitness):
             results.append((detect(c, model, frame, rig, fit_params, p, seed=seed), dataclasses.replace(c, source=name)))
-    results.sort(key=lambda dc: (-dc[0].passed, -dc[0].contrast, -dc[1].fitness))
+    results.sort(key=lambda dc: (-dc[0].standing, -dc[1].fitness))
     cands = tuple(_candidate_json(c, d, model) for d, c in results)
     seconds = time.perf_counter() - t0
     if not results or not results[0][0].passed:
@@ -242,6 +254,7 @@ def _candidate_json(c: Candidate, d: Detection, model: PhotoModel) -> dict:
         "detection_score": round(d.score, 6),
         "null_level": round(d.null_level, 6),
         "contrast": round(d.contrast, 6),
+        "standing": round(d.standing, 6),
         "detection_threshold": round(d.threshold, 6),
         "outer_on_target": round(d.outer_on_target, 4),
         "confidence": round(d.confidence, 4),
