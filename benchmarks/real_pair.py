@@ -8,7 +8,8 @@ Each runs `estimate` from the default search volume except the depth range, wide
 with the default configuration otherwise (`--set` to change it).
 
 Per case: found; the right object (the best candidate's model origin projects into the target's
-box in the left image; judged whether or not the candidate passed detection); depth error (% of
+box in the left image; judged whether or not the candidate passed detection; the summary also
+counts "found" on another object, the one answer worse than "not found"); depth error (% of
 the true depth), lateral error (x, y in the left camera, % of the true depth), size error
 (|alpha_true / alpha_est - 1|, %) of the best candidate; its fitness and detection score; the
 fitness of the truth pose; the GA alone in a window around the truth (`window_search`: where the
@@ -171,7 +172,9 @@ def main(argv: list[str] | None = None) -> int:
     print_tables(rows)
     n = len(rows)
     summary = {"cases": n, "found": int(sum(r["found"] for r in rows)),
-               "right_object": int(sum(r["right_object"] for r in rows)), "all_targets_met": int(sum(ok(r) for r in rows)),
+               "right_object": int(sum(r["right_object"] for r in rows)),
+               "found_wrong_object": int(sum(r["found"] and not r["right_object"] for r in rows)),
+               "all_targets_met": int(sum(ok(r) for r in rows)),
                "window_right_object": int(sum(r["window_right_object"] for r in rows)),
                "depth_pct_median": float(np.median([r["depth_pct"] for r in rows])),
                "lateral_pct_median": float(np.median([r["lateral_pct"] for r in rows])),
@@ -179,7 +182,8 @@ def main(argv: list[str] | None = None) -> int:
                "window_within_targets": int(sum(r["window_depth_pct"] <= TARGETS["depth_pct"] and r["window_lateral_pct"]
                                             <= TARGETS["lateral_pct"] and r["window_size_pct"] <= TARGETS["size_pct"]
                                             for r in rows))}
-    print(f"\nfound {summary['found']}/{n}, right object {summary['right_object']}/{n}, every target met "
+    print(f"\nfound {summary['found']}/{n} (of them on another object: {summary['found_wrong_object']}), "
+          f"right object {summary['right_object']}/{n}, every target met "
           f"{summary['all_targets_met']}/{n}; medians: depth {summary['depth_pct_median']:.1f} %, lateral "
           f"{summary['lateral_pct_median']:.1f} %, size {summary['size_pct_median']:.1f} % (targets: depth <= 5 %, "
           f"lateral <= 5 %, size <= 15 %)")
