@@ -510,7 +510,7 @@ def test_a_file_cut_inside_a_message_is_read_up_to_its_last_complete_message(tmp
         rec.log_static_setup(None, None, None, CONFIG_TOML, seed=2)
         for k in range(12):
             rec.log_frame(k, k / 30, *frame_pair(k))
-            rec._rec.flush()                                 # one message per frame, in order
+            rec.flush()                                      # one message per frame, in order
     data = whole.read_bytes()
     cut = tmp_path / "cut.rrd"
     cut.write_bytes(data[: len(data) // 2 + 7])              # mid-message

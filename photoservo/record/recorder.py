@@ -307,6 +307,15 @@ class Recorder:
         if self._closed:
             raise RuntimeError(f"recording to {self.path} is closed")
 
+    def flush(self) -> None:
+        """Wait until everything logged so far has gone to the stream, then flush the stream
+        (the file has it; a hard kill after this loses none of it)."""
+        self._check()
+        self._deferred.queue.join()
+        self._raise_worker_error()
+        with self._lock:
+            self._rec.flush()
+
     def _defer(self, fn: Any, *args: Any) -> None:
         """Run fn(*args) on the recorder's logging thread, in call order: a rerun call costs
         the calling thread its GIL at every entry and exit, which beside the control-link and
