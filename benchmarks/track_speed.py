@@ -15,6 +15,7 @@ Run: python benchmarks/track_speed.py [--frames 90] [--live-s 15] [--repeats 3]
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import os
 import tempfile
@@ -75,7 +76,8 @@ def live(cfg, seconds: float, rt_priority: int | None = None) -> dict:
     emu = Emulator(cfg.emulator, sim.limits, q0=sim.q0)
     emu.start()
     try:
-        sc = run_sim_realtime(cfg, seconds, sim, emu, settle_s=min(5.0, seconds / 2), rt_priority=rt_priority)
+        cfg = dataclasses.replace(cfg, servo=dataclasses.replace(cfg.servo, settle_s=min(5.0, seconds / 2)))
+        sc = run_sim_realtime(cfg, seconds, sim, emu, rt_priority=rt_priority)
     finally:
         emu.stop()
     late = np.asarray(sc.timings_ms.get("control_late", [np.nan]))

@@ -191,8 +191,11 @@ def test_bad_recordings_are_one_line_errors(recorded: Path, tmp_path: Path, caps
 
 
 def test_hold_error_row_against_hand_computed_numbers(tmp_path: Path):
+    """The table's hold row is the hold score of servo/scores.py: frames with truth captured from
+    [servo] settle_s on while the controller servoed (by the recorded phase events)."""
     from photoservo.geometry import make_pose
     from photoservo.record.compare import run_metrics
+    from photoservo.servo.controller import phase_event
     from photoservo.vision.rig import Rig, default_rig, dump_rig
 
     base = default_rig()
@@ -200,15 +203,38 @@ def test_hold_error_row_against_hand_computed_numbers(tmp_path: Path):
     down = np.diag([1.0, -1.0, -1.0])
     path = tmp_path / "hold.rrd"
     with Recorder.open(path, "track") as rec:
-        rec.log_static_setup(dump_rig(rig), None, None, "[servo]\nhover_mm = 600.0\n", 0)
+        rec.log_static_setup(dump_rig(rig), None, None, "[servo]\nhover_mm = 600.0\nsettle_s = 0.05\n", 0)
         img = np.zeros((8, 8, 3), np.uint8)
-        for k, truth in enumerate([(50, 0, 400), (50, 30, 360), None]):
-            rec.log_frame(k, 0.1 * k, img, img, T_base_left=make_pose(down, [0, 0, 1000.0]))
+        for k, truth in enumerate([(50, 30, 360), (50, 0, 400), (50, 30, 360), (50, 30, 360), None]):
+            rec.log_frame(k, 0.1 * k, img, img, T_base_left=make_pose(down, [0, 0, 1000.0]),
+                          capture_times=(0.1 * k, 0.1 * k + 0.001))
             if truth is not None:
                 rec.log_truth(k, 0.1 * k, make_pose(down, np.array(truth, dtype=float)), (20, 10))
+        rec.event(0.25, phase_event("descend", "holding"))
     # rig centre (50, 0, 1000); wanted 600 mm above the truth: (50, 0, 1000) -> 0 mm,
-    # (50, 30, 960) -> |(0, -30, 40)| = 50 mm; frame 2 has no truth
-    assert run_metrics(read_recording(path))["hold_err_mm"] == pytest.approx(np.sqrt(2500 / 2))
+    # (50, 30, 960) -> |(0, -30, 40)| = 50 mm. Frame 0 is before settle_s, frame 3 after the
+    # descent began, frame 4 has no truth: frames 1 and 2 count
+    m = run_metrics(read_recording(path))
+    assert m["hold_err_mm"] == pytest.approx(np.sqrt(2500 / 2))
+    assert m["hold_yaw_err_deg"] == pytest.approx(0.0, abs=1e-9)   # camera x along the target's long axis
+
+
+def test_replay_table_and_track_json_agree_on_the_same_run(tmp_path: Path, capsys):
+    """Issue 14: one definition of each score. The hold error and hold yaw error `track --json`
+    prints are the numbers replay's table computes from the run's recording, and so are the
+    frames and the found ratio; the replay (same frames, truth copied) gives them again."""
+    path = tmp_path / "run.rrd"
+    assert main(["track", "--sim", "--lockstep", "--duration", "3", "--set", "sim.camera_fps=5", "--seed", "3",
+                 "--set", "servo.settle_s=1.0", "--record", str(path), "--json"]) == 0
+    s = json.loads(capsys.readouterr().out)
+    assert main(["replay", str(path), "--no-record", "--json"]) == 0
+    t = json.loads(capsys.readouterr().out)["table"]
+    assert s["frames"] == t["frames"]["recorded"] == t["frames"]["replay"] == 15
+    assert s["found_ratio"] == t["found_ratio"]["recorded"] == t["found_ratio"]["replay"]
+    assert s["hold_error_rms_mm"] > 0.0
+    for live, row in (("hold_error_rms_mm", "hold_err_mm"), ("hold_yaw_error_rms_deg", "hold_yaw_err_deg")):
+        assert t[row]["recorded"] == pytest.approx(s[live], rel=1e-12, abs=1e-12), row
+        assert t[row]["replay"] == pytest.approx(s[live], rel=1e-12, abs=1e-12), row
 
 
 def test_track_prints_a_path_that_opens_as_printed(tmp_path: Path):

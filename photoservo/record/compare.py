@@ -14,7 +14,8 @@ import numpy as np
 
 from photoservo.errors import InputError
 from photoservo.record.reader import EstimateRecord, Recording, TruthRecord, read_recording
-from photoservo.servo.scores import commanded_motion, hold_error_mm, jitter_mm, rms, track_error_mm
+from photoservo.servo.scores import HoldSample, commanded_motion, hold_sample, jitter_mm, rms, scored_holds, \
+    track_error_mm
 
 
 def _heading_tilt(T: np.ndarray) -> tuple[float, float]:
@@ -46,9 +47,12 @@ def run_metrics(rec: Recording) -> dict[str, float]:
     heading_err_deg   RMS heading difference (model x axis in the base xy plane, wrapped)
     tilt_err_deg      RMS difference of tilt (model z axis from the vertical)
     size_err_mm       RMS over found frames of the mean |size_est - size_true| of the 2 sides
-    hold_err_mm       RMS hold error over every frame with truth and a camera pose, the approach
-                      included ([servo] hover_mm from the recorded config, the rig from the
-                      recorded rig)
+    hold_err_mm       the hold score (servo/scores.py, what `track --json` prints as
+                      hold_error_rms_mm): RMS hold error over the frames with truth and a camera
+                      pose captured from [servo] settle_s on while the controller servoed (the
+                      recorded phase events); hover_mm and settle_s from the recorded config,
+                      the rig from the recorded rig
+    hold_yaw_err_deg  the same frames' RMS hold yaw error (`hold_yaw_error_rms_deg`)
     """
     nan = float("nan")
     est = rec.estimates
@@ -71,7 +75,9 @@ def run_metrics(rec: Recording) -> dict[str, float]:
     m["commanded_rad_s"] = commanded_motion(cmd.values) if cmd is not None else nan
     truth = {tr.frame: tr for tr in rec.truth}
     m.update(_truth_errors(found, truth))
-    m["hold_err_mm"] = rms(_hold_errors(rec, truth))
+    held = _holds(rec, truth)
+    m["hold_err_mm"] = rms([h.error_mm for h in held])
+    m["hold_yaw_err_deg"] = rms([h.yaw_deg for h in held])
     return m
 
 
@@ -94,20 +100,26 @@ def _truth_errors(found: list[EstimateRecord], truth: dict[int, TruthRecord]) ->
             "tilt_err_deg": rms(tilt) * 180 / math.pi, "size_err_mm": rms(size)}
 
 
-def _hold_errors(rec: Recording, truth: dict[int, TruthRecord]) -> list[float]:
-    """The hold error (servo/scores.hold_error_mm) of every frame with truth and a camera pose."""
+def _holds(rec: Recording, truth: dict[int, TruthRecord]) -> list[HoldSample]:
+    """The holds the hold score counts (servo/scores.scored_holds) of the frames with truth and
+    a camera pose, at their capture times, by the recorded config and phase events."""
     import tomllib
+
+    from photoservo.config import load_config
+    from photoservo.servo.controller import left_centre
     try:
         rig = rec.setup.rig()
-        hover = float(tomllib.loads(rec.setup.config_toml or "")["servo"]["hover_mm"])
-    except (KeyError, TypeError, ValueError, InputError):
+        servo = load_config(recorded=("recording", tomllib.loads(rec.setup.config_toml or ""))).servo
+    except (TypeError, ValueError, InputError):
         return []
     if rig is None:
         return []
-    from photoservo.servo.controller import left_centre
     centre = left_centre(rig)
-    return [hold_error_mm(f.T_base_left, centre, truth[f.index].T_base_target[:3, 3], hover)
-            for f in rec.frames if f.index in truth and f.T_base_left is not None]
+    samples = [hold_sample((f.capture_times or (f.t,))[0], f.T_base_left, centre, truth[f.index].T_base_target,
+                           tuple(truth[f.index].size_mm), servo.hover_mm)
+               for f in rec.frames if f.index in truth and f.T_base_left is not None
+               and truth[f.index].size_mm is not None]
+    return scored_holds(samples, [(t, text) for t, _, text in rec.events], servo.settle_s)
 
 
 METRICS: tuple[tuple[str, str, str], ...] = (
@@ -123,7 +135,8 @@ METRICS: tuple[tuple[str, str, str], ...] = (
     ("heading_err_deg", "heading error (deg RMS)", "{:.2f}"),
     ("tilt_err_deg", "tilt error (deg RMS)", "{:.2f}"),
     ("size_err_mm", "size error (mm RMS)", "{:.2f}"),
-    ("hold_err_mm", "hold error vs truth, every frame (mm RMS)", "{:.1f}"),
+    ("hold_err_mm", "hold error vs truth (mm RMS)", "{:.2f}"),
+    ("hold_yaw_err_deg", "hold yaw error vs truth (deg RMS)", "{:.2f}"),
 )
 
 

@@ -291,7 +291,7 @@ class _ReplayLoop:
 
         self.setup, self.cfg, self.rec, self.recorder, self.progress = setup, setup.cfg, setup.recording, recorder, progress
         self.tracker = Tracker.from_config(setup.model, setup.rig, self.cfg, seed=setup.seed, time_budget=False)
-        self.control = ControlLoop(controller_for(self.cfg, setup.rig), None, Scores())
+        self.control = ControlLoop(controller_for(self.cfg, setup.rig), None, Scores(settle_s=self.cfg.servo.settle_s))
         self.rec_gens = {e.frame: e.generations for e in self.rec.estimates}
         self.truth = {tr.frame: tr for tr in self.rec.truth}
         self.latency = self.cfg.sim.capture_latency_s

@@ -10,7 +10,7 @@ Collection (`--collect`):
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Literal
+from typing import Literal, get_args
 
 import numpy as np
 
@@ -28,6 +28,7 @@ from photoservo.vision.rig import Rig
 from photoservo.vision.tracker import Track
 
 Phase = Literal["servo", "descend", "grasp", "ascend", "done", "stopped"]
+PHASES: tuple[str, ...] = get_args(Phase)
 REACH_MM = 1250.0  # distance from the shoulder (S2 axis) beyond which the PA-10 cannot hover
 
 
@@ -70,8 +71,10 @@ class Controller:
     def __post_init__(self) -> None:
         self.height_mm = self.params.hover_mm
 
-    def _event(self, t: float, text: str) -> None:
-        self.events.append((t, text))
+    def _enter(self, t: float, phase: Phase, why: str) -> None:
+        """Change to `phase` at t (s), with its event (`phase_event`)."""
+        self.phase = phase
+        self.events.append((t, phase_event(phase, why)))
 
     def step(self, now: float, q: np.ndarray, dq: np.ndarray, track: Track | None) -> ControlInfo:
         p = self.params
@@ -94,8 +97,8 @@ class Controller:
                 T_des = desired_camera_pose(T_target, track.size_mm, self.height_mm, T_base_cam[:3, :3],
                                             self.T_left_centre)
         elif self.phase in ("descend", "grasp"):
-            self._event(now, f"collection aborted: {stop}; climbing back")
-            self.phase, self.tool_on = "ascend", False
+            self._enter(now, "ascend", f"collection aborted ({stop}), climbing back")
+            self.tool_on = False
         e_p = np.full(3, np.nan)
         yaw = float("nan")
         if T_des is not None:
@@ -121,26 +124,41 @@ class Controller:
             self.t_hold_start = now
         if (self.collect and self.phase == "servo" and self.t_hold_start is not None
                 and now - self.t_hold_start >= p.hold_time_s and not self.collected):
-            self.phase = "descend"
-            self._event(now, f"holding within {p.hold_tolerance_mm:.0f} mm for {p.hold_time_s:.1f} s: descending")
+            self._enter(now, "descend", f"holding within {p.hold_tolerance_mm:.0f} mm for {p.hold_time_s:.1f} s")
 
     def _advance_collection(self, now: float, dt: float) -> None:
         p = self.params
         if self.phase == "descend":
             self.height_mm = max(p.collect_height_mm, self.height_mm - p.collect_speed_mm_s * dt)
             if self.height_mm <= p.collect_height_mm:
-                self.phase, self.t_grasp, self.tool_on = "grasp", now, True
-                self._event(now, "at collection height: tool on")
+                self.t_grasp, self.tool_on = now, True
+                self._enter(now, "grasp", "at collection height, tool on")
         elif self.phase == "grasp":
             if now - self.t_grasp >= p.tool_dwell_s:
-                self.phase = "ascend"
                 self.collected = True
-                self._event(now, "tool dwell over: ascending with the catch")
+                self._enter(now, "ascend", "tool dwell over, with the catch")
         elif self.phase == "ascend":
             self.height_mm = min(p.hover_mm, self.height_mm + p.collect_speed_mm_s * dt)
             if self.height_mm >= p.hover_mm:
-                self.phase = "done" if self.collected else "servo"
-                self._event(now, "collection complete" if self.collected else "back at hover height")
+                done = self.collected
+                self._enter(now, "done" if done else "servo", "collection complete" if done else "back at hover height")
+
+
+def phase_event(phase: Phase, why: str) -> str:
+    """The event text of a change of collection phase, which `phase_of` reads back (the
+    recording's events say when the controller servoed: servo/scores.scored_holds).
+
+    >>> phase_of(phase_event("descend", "holding within 10 mm for 1.5 s"))
+    'descend'
+    """
+    return f"phase {phase}: {why}"
+
+
+def phase_of(text: str) -> Phase | None:
+    """The phase an event text (`phase_event`) enters; None for any other event."""
+    head, sep, _ = text.partition(": ")
+    name = head.removeprefix("phase ")
+    return name if sep and head.startswith("phase ") and name in PHASES else None  # type: ignore[return-value]
 
 
 def left_centre(rig: Rig) -> np.ndarray:

@@ -1,14 +1,17 @@
-"""The run's scores, each defined ONCE here and used by `track --json` / the summary, the status
-line, replay's comparison table (record/reader.run_metrics) and the benchmarks.
+"""The run's scores, each defined ONCE here and used by `track --json` / the summary, replay's
+comparison table (record/compare.run_metrics), `tune` and the benchmarks.
 
   hold error (mm)        distance from the rig's centre (midpoint of the two optical centres)
-                         to where the servo law wants it: straight above the TRUE target's
-                         origin by the controller's height (hover_mm, lower while collecting).
-                         `hold_error_mm`. The summary's `hold_error_rms_mm` is its RMS over the
-                         control periods from settle_s on while servoing; the replay table's row
-                         its RMS over every recorded frame (approach included).
+                         to where the servo law wants it: [servo] hover_mm straight above the
+                         TRUE target's origin (`hold_error_mm`), at each frame's capture time
+                         (the left camera's pose then, the truth then: `hold_sample`). The
+                         score (`hold_error_rms_mm`, the table's hold row) is its RMS over the
+                         frames captured from [servo] settle_s on while the controller servoed
+                         (not while collecting: `scored_holds`), so the live summary and the
+                         table of the run's recording count the same frames with the same
+                         numbers.
   hold yaw error (deg)   the camera x axis against the desired one, both on the horizontal
-                         (servo/control.yaw_error_deg), over the same periods.
+                         (servo/control.yaw_error_deg), over the same frames.
   track error (mm)       |estimated - true| target position (base frame): `track_error_mm`.
   jitter (mm)            RMS second difference of the estimated position over consecutive
                          found frames: shake that a constant-velocity drift does not add.
@@ -20,6 +23,7 @@ Truth exists in simulation only (`Truth`).
 
 from __future__ import annotations
 
+import bisect
 import math
 from dataclasses import dataclass, field
 from typing import Any
@@ -27,6 +31,7 @@ from typing import Any
 import numpy as np
 
 from photoservo.servo.control import desired_camera_pose, yaw_error_deg
+from photoservo.servo.controller import phase_of
 
 Z_UP = np.array([0.0, 0.0, 1.0])
 
@@ -55,6 +60,43 @@ def hold_error_mm(T_base_left: np.ndarray, T_left_centre: np.ndarray, p_target: 
     50.0
     """
     return float(np.linalg.norm(rig_centre(T_base_left, T_left_centre) - p_target - height_mm * Z_UP))
+
+
+@dataclass(frozen=True)
+class HoldSample:
+    """One frame's hold against the truth: capture time t of its left image (s, session time),
+    hold error (mm) and hold yaw error (deg) (module docstring)."""
+
+    t: float
+    error_mm: float
+    yaw_deg: float
+
+
+def hold_sample(t: float, T_base_left: np.ndarray, T_left_centre: np.ndarray, T_base_target: np.ndarray,
+                size_mm: tuple[float, float], height_mm: float) -> HoldSample:
+    """The hold of a frame captured at t (s) with the left camera at T_base_left (4x4, mm, base
+    frame) over the true target at T_base_target (4x4, mm) of size_mm, at height_mm."""
+    T_des = desired_camera_pose(T_base_target, size_mm, height_mm, T_base_left[:3, :3], T_left_centre)
+    return HoldSample(float(t), hold_error_mm(T_base_left, T_left_centre, T_base_target[:3, 3], height_mm),
+                      yaw_error_deg(T_base_left, T_des))
+
+
+def scored_holds(samples: list[HoldSample], events: list[tuple[float, str]], settle_s: float) -> list[HoldSample]:
+    """The samples the hold score counts: captured from settle_s (s) on while the controller was
+    in phase "servo", by the phase events (t, text) among `events` (servo/controller.phase_event;
+    other events are passed over). Samples keep their order.
+
+    >>> s = [HoldSample(t, 1.0, 0.0) for t in (1.0, 2.0, 3.0, 4.0)]
+    >>> [h.t for h in scored_holds(s, [(2.5, "phase descend: ..."), (3.5, "phase servo: ...")], 1.5)]
+    [2.0, 4.0]
+    """
+    changes = sorted((t, p) for t, text in events if (p := phase_of(text)) is not None)
+    times = [t for t, _ in changes]
+
+    def servoing(t: float) -> bool:
+        i = bisect.bisect_right(times, t)
+        return i == 0 or changes[i - 1][1] == "servo"
+    return [h for h in samples if h.t >= settle_s and servoing(h.t)]
 
 
 def track_error_mm(p_estimate: np.ndarray, p_true: np.ndarray) -> float:
@@ -86,8 +128,9 @@ class Scores:
     found: int = 0
     lost_events: int = 0
     acquisitions: int = 0
-    hold_mm: list[float] = field(default_factory=list)  # hold error per control period, settled, servoing
-    hold_yaw_deg: list[float] = field(default_factory=list)
+    settle_s: float = 5.0  # [servo] settle_s: the hold counts from here on (s, session time)
+    holds: list[HoldSample] = field(default_factory=list)  # every frame's hold (simulation)
+    phase_events: list[tuple[float, str]] = field(default_factory=list)  # the controller's, session time
     timings_ms: dict[str, list[float]] = field(default_factory=dict)
     collected: bool = False
     faults: list[str] = field(default_factory=list)
@@ -108,28 +151,37 @@ class Scores:
             self.last_status = status
         return changed
 
-    def score_hold(self, truth: Truth, T_base_cam: np.ndarray, T_left_centre: np.ndarray, height_mm: float,
-                   servoing: bool, t: float, settle_s: float) -> None:
-        """One control period against the truth at scene time t (s): the hold error and yaw
-        error from settle_s on while servoing, and the look-alike's distance."""
+    def score_hold(self, t: float, T_base_left: np.ndarray, T_left_centre: np.ndarray, truth: Truth,
+                   height_mm: float) -> None:
+        """A frame captured at scene time t (s) with the left camera at T_base_left, against the
+        truth then (`hold_sample`); whether it counts is decided at the end (`scored_holds`)."""
+        self.holds.append(hold_sample(t, T_base_left, T_left_centre, truth.motion.pose(t), truth.size_mm, height_mm))
+
+    def score_distractor(self, t: float, T_base_cam: np.ndarray, T_left_centre: np.ndarray, truth: Truth) -> None:
+        """The look-alike's horizontal distance from the rig centre at scene time t (s), if any."""
         if truth.distractor is not None:
             c = rig_centre(T_base_cam, T_left_centre)
             d = truth.distractor.pose(t)[:3, 3]
             self.distractor_min_mm = min(self.distractor_min_mm, float(np.linalg.norm((c - d)[:2])))
-        if t >= settle_s and servoing:
-            T_target = truth.motion.pose(t)
-            self.hold_mm.append(hold_error_mm(T_base_cam, T_left_centre, T_target[:3, 3], height_mm))
-            T_des = desired_camera_pose(T_target, truth.size_mm, height_mm, T_base_cam[:3, :3], T_left_centre)
-            self.hold_yaw_deg.append(yaw_error_deg(T_base_cam, T_des))
+
+    def note_events(self, events: list[tuple[float, str]]) -> None:
+        """Keep the controller's phase events (t in session time, s) for `scored_holds`."""
+        self.phase_events += [(t, text) for t, text in events if phase_of(text) is not None]
+
+    def held(self) -> list[HoldSample]:
+        """The holds the score counts (`scored_holds`)."""
+        return scored_holds(self.holds, self.phase_events, self.settle_s)
 
     def summary(self) -> dict:
         """The session summary (`track --json`)."""
+        held = self.held()
         return {
             "frames": self.frames, "found_ratio": self.found / max(1, self.frames),
             "lost_events": self.lost_events, "acquisitions": self.acquisitions,
             "dropped_frames": self.dropped_frames,
-            "hold_error_rms_mm": rms(self.hold_mm), "hold_yaw_error_rms_deg": rms(self.hold_yaw_deg),
-            "hold_error_max_mm": max(self.hold_mm, default=0.0),
+            "hold_error_rms_mm": rms([h.error_mm for h in held]),
+            "hold_yaw_error_rms_deg": rms([h.yaw_deg for h in held]),
+            "hold_error_max_mm": max((h.error_mm for h in held), default=0.0),
             "collected": self.collected, "faults": list(self.faults),
             "timings_ms_median": {k: float(np.median(v)) for k, v in self.timings_ms.items()},
             "distractor_min_mm": self.distractor_min_mm,

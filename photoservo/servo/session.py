@@ -106,8 +106,9 @@ StatusFn = Callable[[Status], None]
 def vision_step(fr: Frame, tracker: Tracker, cfg: Config, sc: Scores, recorder, truth: Truth | None = None,
                 events: list[tuple[float, str]] | None = None, max_generations: int | None = None,
                 hue: StereoHue | None = None) -> Track:
-    """One frame through the tracker (method step 5), timed, counted and recorded; a change of
-    the track's status goes to `events` at fr.t_delivery. `max_generations`: Tracker.update.
+    """One frame through the tracker (method step 5), timed, counted, scored against the `truth`
+    (simulation: the hold at the frame's capture time) and recorded; a change of the track's
+    status goes to `events` at fr.t_delivery. `max_generations`: Tracker.update.
     `hue`: the fitness input when it is known already (a replay of a compact recording);
     computed from the frame otherwise."""
     c0 = time.perf_counter()
@@ -119,6 +120,8 @@ def vision_step(fr: Frame, tracker: Tracker, cfg: Config, sc: Scores, recorder, 
     sc.time("ga", 1e3 * (c2 - c1))
     if sc.note_track(track.found, track.status) and events is not None:
         events.append((fr.t_delivery, f"track {track.status}"))
+    if truth is not None:
+        sc.score_hold(fr.t_left, fr.T_base_left, left_centre(tracker.rig), truth, cfg.servo.hover_mm)
     if recorder is not None:
         _record_frame(recorder, fr, hue, track, tracker, truth, sc, {"hue": 1e3 * (c1 - c0), "ga": 1e3 * (c2 - c1)})
     return track
@@ -153,7 +156,6 @@ class ControlLoop:
     arm: Arm | None
     scores: Scores
     truth: Truth | None = None
-    settle_s: float = 5.0
     t0: float | None = 0.0
     tool: bool = False
     n_events: int = 0
@@ -163,7 +165,8 @@ def control_tick(c: ControlLoop, now: float, t_state: float, q: np.ndarray, dq: 
                  track: Track | None) -> Tick:
     """One control period (method step 6) at time `now` (s) on the measured joints q (rad),
     dq (rad/s): the controller's step, the setpoint (and a tool switch) sent to the arm, the
-    hold scored against the truth. Returns the period's `Tick`."""
+    look-alike's distance scored against the truth, the phase events kept for the hold score
+    (session time). Returns the period's `Tick`."""
     ctrl = c.ctrl
     info = ctrl.step(now, q, dq, track)
     if c.arm is not None:
@@ -171,11 +174,12 @@ def control_tick(c: ControlLoop, now: float, t_state: float, q: np.ndarray, dq: 
         if info.tool != c.tool:
             c.arm.tool(info.tool)
             c.tool = info.tool
-    if c.truth is not None and c.t0 is not None:
-        c.scores.score_hold(c.truth, info.T_base_cam, ctrl.T_left_centre, ctrl.height_mm, ctrl.phase == "servo",
-                            now - c.t0, c.settle_s)
     events = tuple(ctrl.events[c.n_events:])
     c.n_events = len(ctrl.events)
+    if c.t0 is not None:
+        if c.truth is not None:
+            c.scores.score_distractor(now - c.t0, info.T_base_cam, ctrl.T_left_centre, c.truth)
+        c.scores.note_events([(max(t_e - c.t0, 0.0), text) for t_e, text in events])
     return Tick(now, t_state, q, info.setpoint.q, info.setpoint.dq, info.T_base_cam_des, info.phase,
                 info.position_error_mm, info.yaw_error_deg, info.stop_reason, events)
 
@@ -212,7 +216,6 @@ class ControlJob:
     no_motion: bool
     truth: Truth | None  # simulation: scores the hold against the true target
     t0: float | None  # None: sent as ("t0", t) once the session's clock starts
-    settle_s: float
     rt_priority: int | None  # None: best effort (raise_priority), N: SCHED_FIFO N or an event saying why not
     simulated: bool = False  # the bridge is the simulator's emulator (errors speak of it)
 
@@ -234,7 +237,7 @@ def control_process(job: ControlJob, conn, stop) -> None:
     # it and sets `stop`, so this loop ends in order (controlled stop, servo off)
     ignore_stop_signals()
     cfg = job.cfg
-    c = ControlLoop(controller_for(cfg, job.rig, job.collect), None, Scores(), job.truth, job.settle_s, job.t0)
+    c = ControlLoop(controller_for(cfg, job.rig, job.collect), None, Scores(settle_s=cfg.servo.settle_s), job.truth, job.t0)
     try:
         if job.rt_priority is not None:
             try:
@@ -356,7 +359,7 @@ class _ControlProcess:
 def run_realtime(cfg: Config, duration_s: float, *, port: str, read_frame: Callable[[], StereoFrame | None],
                  model, rig: Rig, collect: bool = False, no_motion: bool = False, recorder=None,
                  status: StatusFn | None = None, seed: int = 0, truth: Truth | None = None,
-                 t0: float | None = None, settle_s: float = 5.0, rt_priority: int | None = None,
+                 t0: float | None = None, rt_priority: int | None = None,
                  stop_event: threading.Event | None = None, simulated: bool = False,
                  start_clock: Callable[[], float] | None = None, say: Callable[[str], None] | None = None) -> Scores:
     """The real-time session. The control loop (`control_process`) runs in its own process,
@@ -371,9 +374,9 @@ def run_realtime(cfg: Config, duration_s: float, *, port: str, read_frame: Calla
     T_fl = rig.T_flange_left()
     warm_start(model, rig, cfg.fitness, say=say)  # before the arm is enabled (no-op when warmed already)
     tracker = Tracker.from_config(model, rig, cfg, seed=seed)
-    sc = Scores()
+    sc = Scores(settle_s=cfg.servo.settle_s)
     stop = stop_event or threading.Event()
-    control = _ControlProcess(ControlJob(cfg, port, rig, collect, no_motion, truth, t0, settle_s, rt_priority,
+    control = _ControlProcess(ControlJob(cfg, port, rig, collect, no_motion, truth, t0, rt_priority,
                                          simulated), recorder, stop)
     events: list[tuple[float, str]] = []
     try:
@@ -419,7 +422,7 @@ def _merge_control_scores(sc: Scores, ctl: Scores | None) -> None:
         return
     sc.faults += ctl.faults
     sc.collected = ctl.collected
-    sc.hold_mm, sc.hold_yaw_deg = ctl.hold_mm, ctl.hold_yaw_deg
+    sc.phase_events = ctl.phase_events
     sc.distractor_min_mm = ctl.distractor_min_mm
     sc.timings_ms.update(ctl.timings_ms)
 

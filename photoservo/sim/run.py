@@ -105,10 +105,10 @@ def _capture(sim: SimSetup, arm: LockstepArm, cfg: Config, k: int, now: float, s
 
 def run_lockstep(cfg: Config, duration_s: float, *, collect: bool = False, no_motion: bool = False,
                  recorder=None, status: StatusFn | None = None, seed: int = 0,
-                 settle_s: float = 5.0, setup: SimSetup | None = None,
+                 setup: SimSetup | None = None,
                  say: Callable[[str], None] | None = None) -> Scores:
     """A simulated session on the simulator's clock (deterministic). Returns the scores; the hold
-    is scored against the TRUE target from `settle_s` on. `say` gets the warm start's one-line
+    is scored against the TRUE target from [servo] settle_s on. `say` gets the warm start's one-line
     notice of a first run."""
     cfg = sim_config(cfg)
     sim = setup or build_sim(cfg)
@@ -116,8 +116,8 @@ def run_lockstep(cfg: Config, duration_s: float, *, collect: bool = False, no_mo
     arm = LockstepArm(cfg.emulator, sim.limits, sim.q0)
     if not no_motion:
         arm.enable()
-    sc = Scores()
-    c = ControlLoop(controller_for(cfg, sim.rig, collect), None if no_motion else arm, sc, sim.truth, settle_s)
+    sc = Scores(settle_s=cfg.servo.settle_s)
+    c = ControlLoop(controller_for(cfg, sim.rig, collect), None if no_motion else arm, sc, sim.truth)
     tracker = Tracker.from_config(sim.scene.model, sim.rig, cfg, seed=seed, time_budget=False)
     dt = 1.0 / cfg.motion.rate_hz
     k = 0

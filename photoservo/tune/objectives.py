@@ -3,17 +3,18 @@ loop, lockstep: servo, tracker and GA keys all act) and/or replayed recordings (
 `record.replay`: tracker and GA keys act, photo-model keys on full recordings; the arm's path is the recorded one), scored
 with the session's own numbers. Every score is "lower is better":
 
-  hold   hold error (mm RMS): the rig centre against the desired pose over the TRUE target,
-         after settling (the lockstep session's `Scores`, what `track --json` prints as
-         hold_error_rms_mm); closed loop only: a replay does not move the arm
+  hold   hold error (mm RMS, servo/scores.py): the rig centre against hover_mm over the TRUE
+         target at each frame, after settling (the lockstep session's `Scores`, what
+         `track --json` prints as hold_error_rms_mm and replay's table as its hold row);
+         closed loop only: a replay does not move the arm
   track  track error (mm RMS): estimated target position against the truth, found frames
          (`record.compare.run_metrics` track_err_mm of the run's recording)
   lost   share of frames whose estimate was not found (0..1)
   cpu    tracker time per frame (ms): hue + GA, mean over frames (wall time of the loop's
          vision step; on a loaded machine it carries the load)
 
-This module is the ONE place where tuning turns a run into these numbers (`world_scores`,
-`recording_scores`); when servo/scores.py lands they become calls into it.
+This module is the ONE place where tuning turns a run into these numbers (`session_scores`,
+`recording_scores`), read from the definitions in servo/scores.py (the summary, the table).
 
 World generator (`world_overrides`): a seed makes a world - the simulator's own seed (textures,
 waves, noise) and, drawn from it, the target's start, heading and drift and the arm's start
@@ -22,6 +23,7 @@ offset - so held-out worlds differ from the tuned ones in more than noise.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import tempfile
 from dataclasses import dataclass, field
@@ -122,14 +124,16 @@ def recording_scores(metrics: dict[str, float]) -> dict[str, float]:
 
 
 def _lockstep(cfg: Config, duration_s: float, seed: int, settle_s: float, need_track: bool) -> dict[str, float]:
-    """One closed-loop lockstep run -> scores (recorded to a temporary file for track error)."""
+    """One closed-loop lockstep run -> scores (recorded to a temporary file for track error); the
+    hold is scored from settle_s ([servo] settle_s of the run)."""
     from photoservo.record.compare import run_metrics
     from photoservo.record.reader import read_recording
     from photoservo.sim.run import build_sim, run_lockstep
 
+    cfg = dataclasses.replace(cfg, servo=dataclasses.replace(cfg.servo, settle_s=settle_s))
     sim = build_sim(cfg)
     if not need_track:
-        sc = run_lockstep(cfg, duration_s, seed=seed, settle_s=settle_s, setup=sim)
+        sc = run_lockstep(cfg, duration_s, seed=seed, setup=sim)
         return session_scores(_summary(sc))
     from photoservo.record.recorder import Recorder
     from photoservo.tomlconf import dump_config
@@ -141,7 +145,7 @@ def _lockstep(cfg: Config, duration_s: float, seed: int, settle_s: float, need_t
         try:
             rec.log_static_setup(dump_rig(sim.rig), sim.scene.photo, sim.scene.model, dump_config(cfg),
                                  {"tracker": seed, "sim": cfg.sim.seed})
-            sc = run_lockstep(cfg, duration_s, seed=seed, settle_s=settle_s, setup=sim, recorder=rec)
+            sc = run_lockstep(cfg, duration_s, seed=seed, setup=sim, recorder=rec)
         finally:
             rec.close()
         scores = session_scores(_summary(sc))
