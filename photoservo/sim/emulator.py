@@ -24,7 +24,7 @@ import select
 import threading
 import time
 import tty
-from dataclasses import dataclass
+from abc import ABC, abstractmethod
 from pathlib import Path
 from typing import Callable, Self
 
@@ -32,23 +32,35 @@ import numpy as np
 
 from photoservo.errors import InputError
 from photoservo.robot import protocol as P
+from photoservo.robot.arm import ArmState
 from photoservo.robot.pa10 import PA10Limits, load_limits
 from photoservo.sim.bridge import FIRMWARE, BridgeModel, EmulatorParams  # noqa: F401 - the emulator's API
 from photoservo.sim.line import FaultInjector, Pacer
 
 
-@dataclass(frozen=True)
-class TrueState:
-    """The emulated arm's true joint state (rad, rad/s) at bridge time `t` (monotonic s)."""
+class Bridge(ABC):
+    """What runs a bridge for a session: `start()` (returns the pty path), `stop()`, a context
+    manager around the two, and `true_state()`: the emulated arm's true joint state (an
+    ArmState: rad, rad/s at bridge time t, monotonic s) for the simulated cameras."""
 
-    t: float
-    q: np.ndarray
-    dq: np.ndarray
-    status: P.Status
-    fault: P.Fault
+    @abstractmethod
+    def start(self) -> str: ...
+
+    @abstractmethod
+    def stop(self) -> None: ...
+
+    @abstractmethod
+    def true_state(self) -> ArmState: ...
+
+    def __enter__(self) -> Self:
+        self.start()
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.stop()
 
 
-class Emulator:
+class Emulator(Bridge):
     """The bridge on a pty, run in a thread.
 
         emu = Emulator(params)            # limits from configs/pa10.toml, arm at HOME_Q
@@ -122,13 +134,6 @@ class Emulator:
         if self.link is not None and self.link.is_symlink():
             self.link.unlink()
 
-    def __enter__(self) -> Self:
-        self.start()
-        return self
-
-    def __exit__(self, *exc) -> None:
-        self.stop()
-
     def silence(self, on: bool = True) -> None:
         """Stop (or resume) all traffic while keeping the pty open: a bridge that hangs."""
         if on:
@@ -142,11 +147,11 @@ class Emulator:
         for f in (self.rx_faults, self.tx_faults):
             f.drop, f.corrupt, f.delay = drop, corrupt, delay
 
-    def true_state(self) -> TrueState:
+    def true_state(self) -> ArmState:
         """The simulated arm's joint state now (copies)."""
         with self._lock:
             m = self.model
-            return TrueState(time.monotonic(), m.q.copy(), m.dq.copy(), m.status(), P.Fault(m.fault))
+            return ArmState(time.monotonic(), m.q.copy(), m.dq.copy(), m.status(), P.Fault(m.fault))
 
     def _close_pty(self) -> None:
         for fd in (self._master, self._slave):

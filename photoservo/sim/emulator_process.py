@@ -17,14 +17,13 @@ from __future__ import annotations
 
 import multiprocessing
 import time
-from typing import Self
-
 import numpy as np
 
 from photoservo.robot import protocol as P
+from photoservo.robot.arm import ArmState
 from photoservo.robot.clock import start_child
 from photoservo.robot.pa10 import N_JOINTS, PA10Limits
-from photoservo.sim.emulator import Emulator, EmulatorParams, TrueState
+from photoservo.sim.emulator import Bridge, Emulator, EmulatorParams
 
 #: SCHED_FIFO priority of the emulator process: above the control process's (see servo/session.py)
 EMULATOR_RT_PRIORITY = 30
@@ -66,7 +65,7 @@ def _emulator_main(params: EmulatorParams, limits: PA10Limits, q0, shared, conn,
             "tick_overruns": emu.tick_overruns, "states_skipped": emu.states_skipped, "end": m.describe_end()}))
 
 
-class EmulatorProcess:
+class EmulatorProcess(Bridge):
     """`Emulator`'s start/stop/true_state/path, run in a spawned process (see the module
     docstring). `scheduling` says what priority it got; `summary` holds its counters after stop()."""
 
@@ -102,14 +101,7 @@ class EmulatorProcess:
         if self._proc.is_alive():  # it ignores SIGTERM (ignore_stop_signals)
             self._proc.kill()
 
-    def __enter__(self) -> Self:
-        self.start()
-        return self
-
-    def __exit__(self, *exc) -> None:
-        self.stop()
-
-    def true_state(self) -> TrueState:
+    def true_state(self) -> ArmState:
         """The emulated arm's joint state at its last tick (copies)."""
         sh = self._shared
         while True:
@@ -120,5 +112,5 @@ class EmulatorProcess:
                     break
             time.sleep(0)
         n = N_JOINTS
-        return TrueState(float(v[1]), v[2:2 + n].copy(), v[2 + n:2 + 2 * n].copy(),
+        return ArmState(float(v[1]), v[2:2 + n].copy(), v[2 + n:2 + 2 * n].copy(),
                          P.Status(int(v[2 + 2 * n])), P.Fault(int(v[3 + 2 * n])))
