@@ -23,7 +23,6 @@ views and poses files in views.py and poses.py.
 from __future__ import annotations
 
 import argparse
-import csv
 
 from photoservo.cli.calibrate.board import run_board
 from photoservo.cli.calibrate.capture import run_capture
@@ -32,7 +31,6 @@ from photoservo.cli.calibrate.hand_eye import run_hand_eye
 from photoservo.cli.calibrate.stereo import run_stereo
 from photoservo.cli.calibrate.water import run_water
 from photoservo.cli.options import add_config_options, bounded
-from photoservo.vision.board import DEFAULT_DICTIONARY
 from photoservo.vision.calibrate import MIN_ROTATION_DEG
 
 
@@ -71,9 +69,7 @@ def _hand_eye_parser(sub) -> None:
                                    "camera from several flange poses -> the rig's [hand_eye]. Pose CSV "
                                    "columns: name,x_mm,y_mm,z_mm,rx_rad,ry_rad,rz_rad (T_base_flange, "
                                    "rotation vector) or name,q1_rad..q7_rad (PA-10 joints).")
-    h.add_argument("--rig", required=True, metavar="RIG.toml", help="the stereo rig from `calibrate stereo`")
-    h.add_argument("--views", required=True, metavar="DIR", help="left images (DIR or DIR/left)")
-    h.add_argument("--poses", metavar="POSES.csv", help="flange poses (default DIR/poses.csv)")
+    _rig_views_poses(h, "the stereo rig from `calibrate stereo`", True, "left images (DIR or DIR/left)")
     board_options(h)
     h.add_argument("--method", default="park", choices=["park", "tsai", "horaud", "andreff", "daniilidis"],
                    help="cv2.calibrateHandEye method (default park: as accurate as tsai on the test views, "
@@ -83,15 +79,21 @@ def _hand_eye_parser(sub) -> None:
                    help=f"write the result even when the poses rotate less than {MIN_ROTATION_DEG:.0f} deg")
 
 
+def _rig_views_poses(p, rig_help: str, views_required: bool, views_help: str) -> None:
+    """--rig, --views and --poses: a rig and board views taken from known flange poses."""
+    p.add_argument("--rig", required=True, metavar="RIG.toml", help=rig_help)
+    p.add_argument("--views", required=views_required, metavar="DIR", help=views_help)
+    p.add_argument("--poses", metavar="POSES.csv", help="flange poses (default DIR/poses.csv)")
+
+
 def _water_parser(sub) -> None:
     w = sub.add_parser("water", help="the water surface height in the base frame",
                        description="Fit the water plane to a board or single ArUco markers (--markers) "
                                    "floating on it, seen by the calibrated rig (with [hand_eye]) from known "
                                    "flange poses. One view of one board or of three markers is enough; "
                                    "markers spread out give the tilt too.")
-    w.add_argument("--rig", required=True, metavar="RIG.toml", help="the rig, with [hand_eye] (`calibrate hand-eye`)")
-    w.add_argument("--views", metavar="DIR", help="DIR/left (+ DIR/right) images, or DIR")
-    w.add_argument("--poses", metavar="POSES.csv", help="flange poses (default DIR/poses.csv)")
+    _rig_views_poses(w, "the rig, with [hand_eye] (`calibrate hand-eye`)", False,
+                     "DIR/left (+ DIR/right) images, or DIR")
     w.add_argument("--markers", type=bounded(float, 0.0, 1000.0, lo_open=True, unit="mm"), metavar="SIDE_MM",
                    help="single ArUco markers of this side (mm, black square) from --dict instead of a board")
     w.add_argument("--live", action="store_true",
@@ -118,13 +120,8 @@ def _capture_parser(sub) -> None:
     c.add_argument("--out", required=True, metavar="DIR", help="writes DIR/left, DIR/right, DIR/capture.csv")
     c.add_argument("--interval", type=bounded(float, 0.0, 3600.0, unit="s"), default=0.0, metavar="S", help="save every S seconds (0: on Enter)")
     c.add_argument("--count", type=bounded(int, 0, 100000), default=0, metavar="N", help="stop after N pairs (0: until q / end)")
-    c.add_argument("--board", metavar="COLSxROWS", help="draw the found corners in the preview; " + BOARD_HELP)
-    c.add_argument("--square-mm", type=bounded(float, 0.0, 1000.0, lo_open=True, unit="mm"), default=25.0,
-                   help="square side (mm), for the preview's board (default 25)")
-    c.add_argument("--charuco", action="store_true", help="the preview's board is a ChArUco board")
-    c.add_argument("--marker-mm", type=bounded(float, 0.0, 1000.0, unit="mm"), default=0.0,
-                   help="ChArUco marker side (mm); default 0.7 x square")
-    c.add_argument("--dict", default=DEFAULT_DICTIONARY, help=f"ChArUco dictionary (default {DEFAULT_DICTIONARY})")
+    board_options(c, required=False)   # the preview draws the board's corners it finds
+    c.set_defaults(square_mm=25.0)
     c.add_argument("--require-board", action="store_true", help="save only pairs with the board in both images")
     c.add_argument("--port", help="serial port of the arm's bridge: log the flange pose of each pair")
     add_config_options(c)
