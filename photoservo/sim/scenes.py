@@ -242,21 +242,7 @@ def random_scene(seed: int, params: SynthParams, photo_params, kind: str = "squi
     split: a band of foam across the creature (perpendicular to its longer box side, 10-18 % of
     that side wide, centred within the middle 40 %), cutting its hue region in two (drawn from a
     random stream of its own: the rest of the scene is the same as without it).
-
-    Ground truth (`truth`, the estimate JSON of DESIGN.md plus extra keys), in the TRUE left
-    camera frame, for the photo-model the estimator builds from ITS photo with `photo_params`:
-      rotation, position_mm: X_left = R · X_model + position, for that model's frame;
-      alpha_px_per_mm: px of the estimator's photo per mm of the floating creature;
-      size_mm: that model's size_px / alpha.
-    Same photo: exact. Other photo: the two individuals are matched by their masks — equal area
-    in mm² (alpha_B = alpha_A · sqrt(area_B / area_A)) and coincident mask centroids — so
-    position_mm is where model B's origin (its box centre) lands on the creature, and size_mm is
-    B's box at that scale (on the shipped specimens this matching is within 4 % in scale and
-    2 px of the best-overlap (IoU) alignment). creature_size_mm is the floating creature's own
-    box size (mm). With "bend", the truth is the flat model tangent to the bent body at its
-    origin; the ends rise towards the camera by params.bend x length.
-    Extra keys: distance_mm (depth of the creature's model origin), tilt_deg, same_photo,
-    creature_size_mm, calibration_error, effects, distractors, split, seed."""
+    Ground truth: `_truth`."""
     if photo is not None and other_photo and estimator_photo is None:
         raise InputError("other_photo with a given photo needs the other individual's estimator_photo")
     bad = [e for e in effects if e not in EFFECTS]
@@ -267,52 +253,69 @@ def random_scene(seed: int, params: SynthParams, photo_params, kind: str = "squi
     rig_true, calib = perturb_rig(rig, rng, params.calib_rotation_deg, params.calib_focal_pct)
     renderer = StereoRenderer(rig_true)
     render_photo, estimator_photo, model_A, model_B = _photos(kind, photo, estimator_photo, other_photo, photo_params)
-    same = estimator_photo is render_photo
     fx = set(effects)
-    water = calm_water(int(rng.integers(1 << 30)), wave_slope=params.wave_slope if "waves" in fx else 0.0,
-                       glint=params.glint if "glints" in fx else 0.0)
-    water = water if "waves" in fx else Water(**{**water.__dict__, "ripple": 0.0})
+    water = _water(rng, params, fx)
     dist = float(rng.uniform(*params.distance_mm)) if distance_mm is None else float(distance_mm)
     tilt = float(np.radians(rng.uniform(0, params.tilt_max_deg) if tilt_deg is None else tilt_deg))
     heading = float(rng.uniform(-np.pi, np.pi))
     wA, hA = model_A.size_px
-    cam = rig_true.left
     T_world_model = lying_on_water([0.0, 0.0, 0.0], heading)
     length, alpha_A, T_world_left = _place_cameras(rng, params, rig_true, model_A, T_world_model, dist, tilt)
     bend = params.bend * length if "bend" in fx else 0.0
     target = floater_from_model(render_photo, model_A, alpha_A, T_world_model, bend_mm=bend)
-    T_left_world = np.linalg.inv(T_world_left)
     water = _sun_in_view(rng, water, T_world_left)
-    distractors: list[Floater] = []
-    dinfo: list[dict] = []
-    if distractor:
-        d = _distractor(rng, kind, render_photo, model_A, photo_params, length, renderer.rays_left, cam, T_world_left)
-        if d is not None:
-            distractors.append(d.floater)
-            dinfo.append({"kind": d.kind, "position_mm": [float(v) for v in (T_left_world @ d.floater.T_world_model)[:3, 3]]})
+    d = (_distractor(rng, kind, render_photo, model_A, photo_params, length, renderer.rays_left, rig_true.left,
+                     T_world_left) if distractor else None)
+    distractors = () if d is None else (d.floater,)
+    dinfo = [] if d is None else [{"kind": d.kind, "position_mm": [
+        float(v) for v in (np.linalg.inv(T_world_left) @ d.floater.T_world_model)[:3, 3]]}]
     foam = _foam(rng, params, model_A, alpha_A, T_world_model, length) if "foam" in fx else None
     if split:
         foam = _split_band(seed, wA / alpha_A, hA / alpha_A, T_world_model, foam)
-    scene = Scene(water=water, target=None if empty else target, distractors=tuple(distractors), foam=foam)
+    scene = Scene(water=water, target=None if empty else target, distractors=distractors, foam=foam)
     left, right = renderer.render(scene, T_world_left, 0.0, rng, _camera_effects(rng, params, fx))
-    # ground truth for the estimator's photo-model (see docstring)
-    T_left_model = T_left_world @ T_world_model
+    truth = {**_truth(empty, np.linalg.inv(T_world_left) @ T_world_model, model_A, model_B, alpha_A,
+                      estimator_photo is render_photo),
+             "calibration_error": calib, "effects": sorted(fx), "distractors": dinfo, "split": bool(split),
+             "seed": int(seed)}
+    return SyntheticScene(left=left, right=right, rig=rig, rig_true=rig_true, truth=truth, photo=estimator_photo,
+                          render_photo=render_photo, scene=scene, T_world_left=T_world_left)
+
+
+def _water(rng: np.random.Generator, params: SynthParams, fx: set[str]) -> Water:
+    """The scene's water: calm, with waves and glints when those effects are on."""
+    water = calm_water(int(rng.integers(1 << 30)), wave_slope=params.wave_slope if "waves" in fx else 0.0,
+                       glint=params.glint if "glints" in fx else 0.0)
+    return water if "waves" in fx else Water(**{**water.__dict__, "ripple": 0.0})
+
+
+def _truth(empty: bool, T_left_model: np.ndarray, model_A: PhotoModel, model_B: PhotoModel, alpha_A: float,
+           same: bool) -> dict:
+    """The scene's ground truth (`random_scene`'s `truth`: the estimate JSON of DESIGN.md plus
+    extra keys) of the creature at T_left_model (photo-model A's frame in the TRUE left camera,
+    mm) for the photo-model B the estimator builds from ITS photo:
+      rotation, position_mm: X_left = R · X_model + position, for that model's frame;
+      alpha_px_per_mm: px of the estimator's photo per mm of the floating creature;
+      size_mm: that model's size_px / alpha.
+    Same photo: exact. Other photo: the two individuals are matched by their masks — equal area
+    in mm² (alpha_B = alpha_A · sqrt(area_B / area_A)) and coincident mask centroids — so
+    position_mm is where model B's origin (its box centre) lands on the creature, and size_mm is
+    B's box at that scale (on the shipped specimens this matching is within 4 % in scale and
+    2 px of the best-overlap (IoU) alignment). creature_size_mm is the floating creature's own
+    box size (mm). With "bend", the truth is the flat model tangent to the bent body at its
+    origin; the ends rise towards the camera by params.bend x length.
+    Extra keys here: distance_mm (depth of the creature's model origin), same_photo,
+    creature_size_mm; random_scene adds calibration_error, effects, distractors, split, seed."""
+    wA, hA = model_A.size_px
     R = T_left_model[:3, :3]
     alpha, origin_mm = (alpha_A, np.zeros(3)) if same else match_individuals(model_A, model_B, alpha_A)
     position = R @ origin_mm + T_left_model[:3, 3]
-    truth = {
+    return {
         **scene_truth(empty, R, position, alpha, model_B),
         "distance_mm": float(T_left_model[2, 3]),
         "same_photo": bool(same),
         "creature_size_mm": [float(wA / alpha_A), float(hA / alpha_A)],
-        "calibration_error": calib,
-        "effects": sorted(fx),
-        "distractors": dinfo,
-        "split": bool(split),
-        "seed": int(seed),
     }
-    return SyntheticScene(left=left, right=right, rig=rig, rig_true=rig_true, truth=truth, photo=estimator_photo,
-                          render_photo=render_photo, scene=scene, T_world_left=T_world_left)
 
 
 def _photos(kind: str, photo: np.ndarray | None, estimator_photo: np.ndarray | None, other_photo: bool,

@@ -73,10 +73,7 @@ def fit_target_plane(R: np.ndarray, t: np.ndarray, alpha: float, model: PhotoMod
     X = Xm @ np.asarray(R).T + np.asarray(t)  # (N, 3) left frame
     uv_l = project_points(X, rig.left)
     if on_target is not None:
-        c = np.rint(np.nan_to_num(uv_l, nan=-1)).astype(np.intp)
-        inside = (c[:, 0] >= 0) & (c[:, 0] < on_target.shape[1]) & (c[:, 1] >= 0) & (c[:, 1] < on_target.shape[0])
-        hit = np.zeros(len(X), bool)
-        hit[inside] = on_target[c[inside, 1], c[inside, 0]]
+        hit = _on_target(uv_l, on_target)
         X, uv_l = X[hit], uv_l[hit]
         if len(X) < min_points:
             return None
@@ -112,6 +109,22 @@ def fit_target_plane(R: np.ndarray, t: np.ndarray, alpha: float, model: PhotoMod
     off = np.where(den < -1e-9, 0.5 * (y0 - y2) / np.where(den < -1e-9, den, -1.0), 0.0)
     step = lam[1] - lam[0]
     P = X[n] * (lam[k] + np.clip(off, -0.5, 0.5) * step)[:, None]
+    return _robust_plane(P, min_points)
+
+
+def _on_target(uv: np.ndarray, on_target: np.ndarray) -> np.ndarray:
+    """Which image points uv (N, 2) px fall on a True pixel of the bool image `on_target`."""
+    c = np.rint(np.nan_to_num(uv, nan=-1)).astype(np.intp)
+    inside = (c[:, 0] >= 0) & (c[:, 0] < on_target.shape[1]) & (c[:, 1] >= 0) & (c[:, 1] < on_target.shape[0])
+    hit = np.zeros(len(uv), bool)
+    hit[inside] = on_target[c[inside, 1], c[inside, 0]]
+    return hit
+
+
+def _robust_plane(P: np.ndarray, min_points: int) -> PlaneFit | None:
+    """The plane through the matched points P (N, 3) mm: least squares (SVD), three rounds of
+    rejecting points beyond 3 robust sigmas (MAD) + 1 mm; None when fewer than min_points stay.
+    The normal points to +z of the left camera frame (away from the camera)."""
     keep = np.ones(len(P), bool)
     for _ in range(3):
         c = P[keep].mean(axis=0)
