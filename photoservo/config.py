@@ -27,7 +27,7 @@ from photoservo.record.recorder import RecordingParams
 from photoservo.sim.world import SimParams
 from photoservo.vision.fitness import FitnessParams
 from photoservo.vision.photo_model import PhotoModelParams
-from photoservo.vision.sources import CamerasParams
+from photoservo.vision.source_config import CamerasParams
 from photoservo.sim.scenes import SynthParams
 from photoservo.vision.tracker import TrackerParams
 

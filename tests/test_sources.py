@@ -203,7 +203,7 @@ def test_config_validation_names_the_field(tmp_path, build, message):
 
 
 def cameras(**kw):
-    from photoservo.vision.sources import CamerasParams
+    from photoservo.vision.source_config import CamerasParams
 
     base = {"kind": "none", "left": "", "right": "", "width": 0, "height": 0, "fps": 0.0, "fourcc": "", "exposure": 0.0,
                 "white_balance_k": 0.0, "max_skew_ms": 5.0, "timeout_s": 1.0, "realtime": True}
@@ -212,7 +212,7 @@ def cameras(**kw):
 
 
 def test_cameras_section_maps_to_source_configs(tmp_path):
-    from photoservo.vision.sources import source_config
+    from photoservo.vision.source_config import source_config
 
     assert source_config(cameras()) is None
     c = source_config(cameras(kind="devices", left="0", right="/dev/video2", width=640, height=480,
@@ -227,7 +227,7 @@ def test_cameras_section_maps_to_source_configs(tmp_path):
 
 
 def test_cameras_section_errors_name_the_key(tmp_path):
-    from photoservo.vision.sources import source_config
+    from photoservo.vision.source_config import source_config
 
     with pytest.raises(InputError, match="config key 'cameras.right'"):
         cameras(kind="videos", left="a.avi").validate("cameras")
@@ -252,7 +252,7 @@ def test_refused_device_settings_are_reported_not_fatal(tmp_path):
 def test_latest_frame_reader_hands_out_the_newest_pair(tmp_path):
     """Cameras at 20 fps (videos paced in real time), a consumer that takes a frame every
     120 ms: it gets fresh frames, and the ones it missed are counted as overwritten."""
-    from photoservo.vision.sources import LatestFrameReader
+    from photoservo.vision.frame_reader import LatestFrameReader
 
     left = write_video(tmp_path / "l.avi", 12, 20.0, 0)
     right = write_video(tmp_path / "r.avi", 12, 20.0, 1)
@@ -272,7 +272,7 @@ def test_latest_frame_reader_hands_out_the_newest_pair(tmp_path):
 
 
 def test_latest_frame_reader_needs_start_and_reports_errors(tmp_path):
-    from photoservo.vision.sources import LatestFrameReader
+    from photoservo.vision.frame_reader import LatestFrameReader
 
     (tmp_path / "L").mkdir()
     (tmp_path / "R").mkdir()

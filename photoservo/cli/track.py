@@ -257,31 +257,43 @@ def _run_sim(args, cfg) -> int:
         cfg = dataclasses.replace(cfg, sim=dataclasses.replace(cfg.sim, lockstep=True))
     sim = build_sim(cfg)
     status = _StatusLine(args.no_motion)
-    rec = _recorder(args, cfg)
-    stop: KeyboardInterrupt | None = None
-    try:
+
+    def session(held: dict):
+        rec = held["rec"] = _recorder(args, cfg)
         if rec is not None:
             _setup_static(rec, cfg, sim.rig, sim.scene.photo, sim.scene.model, args.seed, {"sim": cfg.sim.seed})
         if args.lockstep or cfg.sim.lockstep:
-            sc = run_lockstep(cfg, args.duration, collect=args.collect, no_motion=args.no_motion,
-                              recorder=rec, status=status, seed=args.seed, setup=sim, say=_say)
-        else:
-            emu = EmulatorProcess(cfg.emulator, sim.limits, q0=sim.q0)  # its own process, prioritised
-            emu.start()
-            try:
-                sc = run_sim_realtime(cfg, args.duration, sim, emu, collect=args.collect, no_motion=args.no_motion,
-                                      recorder=rec, status=status, seed=args.seed, rt_priority=args.rt_priority,
-                                      say=_say)
-            finally:
-                emu.stop()
-                if rec is not None:  # what the emulated bridge saw: the stop and servo off, in order
-                    rec.event(rec.last_t, f"emulated bridge: {emu.summary.get('end', 'no report')}")
-    except KeyboardInterrupt as e:  # Ctrl-C, SIGTERM, SIGHUP: the session stopped the arm in order
+            return run_lockstep(cfg, args.duration, collect=args.collect, no_motion=args.no_motion,
+                                recorder=rec, status=status, seed=args.seed, setup=sim, say=_say)
+        emu = EmulatorProcess(cfg.emulator, sim.limits, q0=sim.q0)  # its own process, prioritised
+        emu.start()
+        try:
+            return run_sim_realtime(cfg, args.duration, sim, emu, collect=args.collect, no_motion=args.no_motion,
+                                    recorder=rec, status=status, seed=args.seed, rt_priority=args.rt_priority,
+                                    say=_say)
+        finally:
+            emu.stop()
+            if rec is not None:  # what the emulated bridge saw: the stop and servo off, in order
+                rec.event(rec.last_t, f"emulated bridge: {emu.summary.get('end', 'no report')}")
+    return _finish(args, cfg, status, session)
+
+
+def _finish(args, cfg, status: _StatusLine, session) -> int:
+    """Run `session(held)` — which puts its recorder (or None) in held["rec"] as soon as it has
+    made it and returns the scores — then end the status line, close the recording and report:
+    the summary, or after Ctrl-C / SIGTERM / SIGHUP (the session stopped the arm in order) the
+    one line of `report_stop`."""
+    held: dict = {}
+    stop: KeyboardInterrupt | None = None
+    try:
+        sc = session(held)
+    except KeyboardInterrupt as e:
         stop = e
     finally:
         status.close()
-        if rec is not None:
-            rec.close()
+        if held.get("rec") is not None:
+            held["rec"].close()
+    rec = held.get("rec")
     if stop is not None:
         return report_stop("track", stop, _stopped(args, rec))
     return _report(args, sc, rec, cfg, status)
@@ -298,7 +310,9 @@ def _run_hardware(args, cfg) -> int:
     from photoservo.servo.session import run_realtime
     from photoservo.vision.photo_model import build_photo_model
     from photoservo.vision.rig import load_rig
-    from photoservo.vision.sources import LatestFrameReader, make_source, source_config
+    from photoservo.vision.frame_reader import LatestFrameReader
+    from photoservo.vision.source_config import source_config
+    from photoservo.vision.sources import make_source
 
     for flag in ("rig", "photo", "port"):
         if not getattr(args, flag):
@@ -314,23 +328,13 @@ def _run_hardware(args, cfg) -> int:
     if "://" not in args.port and not Path(args.port).exists():
         raise InputError(f"--port {args.port}: cannot open: no such device; `photoservo find-port` lists the serial ports")
     status = _StatusLine(args.no_motion)
-    rec = None
-    stop: KeyboardInterrupt | None = None
-    try:
+
+    def session(held: dict):
         with LatestFrameReader(make_source(src_cfg)) as reader:  # cameras first: a failed start leaves no recording
-            rec = _recorder(args, cfg)
+            rec = held["rec"] = _recorder(args, cfg)
             if rec is not None:
                 _setup_static(rec, cfg, rig, photo, model, args.seed, {})
-            sc = run_realtime(cfg, args.duration, port=args.port, read_frame=lambda: reader.latest(timeout_s=0.5),
-                              model=model,
-                              rig=rig, collect=args.collect, no_motion=args.no_motion, recorder=rec,
-                              status=status, seed=args.seed, rt_priority=args.rt_priority, say=_say)
-    except KeyboardInterrupt as e:  # Ctrl-C, SIGTERM, SIGHUP: the session stopped the arm in order
-        stop = e
-    finally:
-        status.close()
-        if rec is not None:
-            rec.close()
-    if stop is not None:
-        return report_stop("track", stop, _stopped(args, rec))
-    return _report(args, sc, rec, cfg, status)
+            return run_realtime(cfg, args.duration, port=args.port, read_frame=lambda: reader.latest(timeout_s=0.5),
+                                model=model, rig=rig, collect=args.collect, no_motion=args.no_motion, recorder=rec,
+                                status=status, seed=args.seed, rt_priority=args.rt_priority, say=_say)
+    return _finish(args, cfg, status, session)

@@ -8,7 +8,7 @@ import dataclasses
 from photoservo.cli.options import bounded
 from photoservo.errors import InputError
 from photoservo.vision.board import Board, DEFAULT_DICTIONARY
-from photoservo.vision.sources import CamerasParams, SourceConfig, source_config
+from photoservo.vision.source_config import CamerasParams, SourceConfig, source_config
 
 
 BOARD_HELP = "board size as COLSxROWS INNER corners (where four squares meet): 10 x 7 squares -> 9x6"
