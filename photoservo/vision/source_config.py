@@ -48,16 +48,14 @@ def _check_device(name: str, device: int | str) -> None:
         raise InputError(f"{name} must not be empty")
 
 
-@dataclass(frozen=True)
-class OpenCVPairConfig:
-    """Two OpenCV capture devices. `left`/`right`: a device index (0, 1, ...) or a path
-    (/dev/video2, a video file, a GStreamer/URL string). width/height/fps 0 and fourcc ''
-    keep the device's defaults; `exposure` (device units) and `white_balance_k` (kelvin) lock
-    those settings when given, None leaves them automatic. A pair whose two grab times differ by
-    more than `max_skew_s` is dropped; `read()` gives up after `timeout_s`."""
+@dataclass(frozen=True, kw_only=True)
+class CaptureSettings:
+    """What an OpenCV device is asked for (keyword-only in the configs below): width/height/fps 0
+    and fourcc '' keep the device's defaults; `exposure` (device units) and `white_balance_k`
+    (kelvin) lock those settings when given, None leaves them automatic. A pair whose two
+    capture times differ by more than `max_skew_s` is dropped; `read()` gives up after
+    `timeout_s`."""
 
-    left: int | str
-    right: int | str
     width: int = 0
     height: int = 0
     fps: float = 0.0
@@ -66,38 +64,42 @@ class OpenCVPairConfig:
     white_balance_k: float | None = None
     max_skew_s: float = 0.005
     timeout_s: float = 1.0
+
+    def _check_settings(self) -> None:
+        _check_capture(self.width, self.height, self.fps, self.fourcc, self.exposure, self.white_balance_k)
+        _check_common(self.max_skew_s, self.timeout_s)
+
+
+@dataclass(frozen=True)
+class OpenCVPairConfig(CaptureSettings):
+    """Two OpenCV capture devices, grabbed back to back. `left`/`right`: a device index (0, 1,
+    ...) or a path (/dev/video2, a video file, a GStreamer/URL string); the rest:
+    `CaptureSettings`."""
+
+    left: int | str
+    right: int | str
 
     def __post_init__(self) -> None:
         _check_device("left", self.left)
         _check_device("right", self.right)
         if self.left == self.right:
             raise InputError(f"left and right must be different devices, both are {self.left!r}")
-        _check_capture(self.width, self.height, self.fps, self.fourcc, self.exposure, self.white_balance_k)
-        _check_common(self.max_skew_s, self.timeout_s)
+        self._check_settings()
 
 
 @dataclass(frozen=True)
-class SideBySideConfig:
+class SideBySideConfig(CaptureSettings):
     """One device whose image holds the left view in its left half and the right view in its
     right half (most USB stereo cameras). width/height are the FULL image's size (0 = default);
-    the other fields as in `OpenCVPairConfig`. Both halves share one capture time (skew 0)."""
+    the rest: `CaptureSettings`. Both halves share one capture time (skew 0)."""
 
     device: int | str
-    width: int = 0
-    height: int = 0
-    fps: float = 0.0
-    fourcc: str = ""
-    exposure: float | None = None
-    white_balance_k: float | None = None
-    max_skew_s: float = 0.005
-    timeout_s: float = 1.0
 
     def __post_init__(self) -> None:
         _check_device("device", self.device)
         if self.width % 2:
             raise InputError(f"width must be even for a side-by-side device (two halves), got {self.width}")
-        _check_capture(self.width, self.height, self.fps, self.fourcc, self.exposure, self.white_balance_k)
-        _check_common(self.max_skew_s, self.timeout_s)
+        self._check_settings()
 
 
 @dataclass(frozen=True)

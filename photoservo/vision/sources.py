@@ -30,6 +30,7 @@ import numpy as np
 
 from photoservo.errors import InputError
 from photoservo.vision.source_config import (
+    CaptureSettings,
     ImageFolderConfig,
     OpenCVPairConfig,
     SideBySideConfig,
@@ -194,7 +195,7 @@ def _open_capture(device: int | str, what: str) -> cv2.VideoCapture:
     return cap
 
 
-def _apply_settings(cap: cv2.VideoCapture, cfg: OpenCVPairConfig | SideBySideConfig, what: str,
+def _apply_settings(cap: cv2.VideoCapture, cfg: CaptureSettings, what: str,
                     warnings: list[str]) -> None:
     """Set FOURCC, size, fps, and lock exposure / white balance when asked. A setting the device
     refuses is recorded in `warnings` (many drivers ignore some), not fatal."""
