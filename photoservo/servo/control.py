@@ -38,7 +38,7 @@ class ServoParams:
     collect_height_mm: float  # rig centre height above the target at which the tool fires
     collect_speed_mm_s: float  # descent/ascent speed during collection
     tool_dwell_s: float  # how long the tool output stays on at the bottom
-    settle_s: float  # scores (simulation): the hold error counts from this session time on (s)
+    settle_s: float = 5.0  # scores (simulation): the hold error counts from this session time on (s)
 
     def validate(self, where: str) -> None:
         for name in ("hover_mm", "k_position", "k_rotation", "max_speed_mm_s", "max_rotation_deg_s",
