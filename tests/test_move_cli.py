@@ -49,7 +49,7 @@ def test_move_reaches_target_and_disables(emu, tmp_path, capsys):
     # state, whose first setpoint can lie more than one period's travel behind the last one: the
     # bridge refuses a few such JUMPs and the stream heals (benchmarks/link.py counts them)
     assert set(emu.model.refusals) <= {"JUMP"} and emu.model.refused <= 10, emu.model.refusals
-    from photoservo.record.recorder import verify_rrd
+    from photoservo.record.files import verify_rrd
 
     files = sorted(tmp_path.glob("move*.rrd"))  # one file, or segments move.seg0001.rrd ...
     assert files and all(verify_rrd(f) == (True, verify_rrd(f)[1]) for f in files)

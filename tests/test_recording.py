@@ -21,7 +21,8 @@ from photoservo.geometry import make_pose
 from photoservo.record.compare import compare_runs, run_metrics
 from photoservo.record.planes import tracker_planes
 from photoservo.record.reader import describe_truncation, iter_frames, read_recording
-from photoservo.record.recorder import PREVIEW_WARNING, Recorder, default_path, rerun_cli, verify_rrd
+from photoservo.record.files import default_path, rerun_cli, verify_rrd
+from photoservo.record.recorder import PREVIEW_WARNING, Recorder
 from photoservo.vision.fitness import stereo_hue
 from photoservo.vision.estimator import Estimate
 from photoservo.vision.photo_model import PhotoModel

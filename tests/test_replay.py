@@ -18,7 +18,8 @@ from photoservo.errors import InputError
 from photoservo.cli.main import main
 from photoservo.config import load_config
 from photoservo.record.planes import tracker_input
-from photoservo.record.recorder import Recorder, verify_rrd
+from photoservo.record.files import verify_rrd
+from photoservo.record.recorder import Recorder
 from photoservo.record.replay import load_replay, replay
 from photoservo.record.reader import iter_frames, read_recording
 from photoservo.tomlconf import dump_config
@@ -243,7 +244,7 @@ def test_track_prints_a_path_that_opens_as_printed(tmp_path: Path):
     import subprocess
     import sys
 
-    from photoservo.record.recorder import rerun_cli
+    from photoservo.record.files import rerun_cli
 
     logs = tmp_path / "logs"
     r = subprocess.run([sys.executable, "-m", "photoservo.cli", "track", *SHORT, "--seed", "3",

@@ -187,7 +187,7 @@ def test_ctrl_c_stops_the_arm_and_leaves_a_verified_recording(tmp_path):
     import sys
     import time
 
-    from photoservo.record.recorder import verify_rrd
+    from photoservo.record.files import verify_rrd
     from photoservo.record.reader import read_recording
 
     rec = tmp_path / "ctrl_c.rrd"

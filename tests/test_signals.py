@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 
 from photoservo.record.reader import read_recording
-from photoservo.record.recorder import verify_rrd
+from photoservo.record.files import verify_rrd
 from photoservo.robot import protocol as P
 from photoservo.robot.pa10 import HOME_Q
 from photoservo.sim.emulator import Emulator, EmulatorParams

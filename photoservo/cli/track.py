@@ -154,7 +154,7 @@ def _run_world_from(args: argparse.Namespace) -> int:
     as usual (to a temporary file with --no-record, for the table)."""
     import tempfile
 
-    from photoservo.record.recorder import default_path
+    from photoservo.record.files import default_path
     from photoservo.record.replay import compare_runs, world_from
 
     if args.port or args.cameras:

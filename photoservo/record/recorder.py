@@ -47,9 +47,6 @@ from __future__ import annotations
 
 import json
 import logging
-import platform
-import subprocess
-import sys
 import threading
 import tomllib
 import uuid
@@ -67,6 +64,7 @@ from photoservo.record import layout as L
 from photoservo.record.layout import rr
 from photoservo.record.drawing import Drawing, transform
 from photoservo.record.encoding import VIDEO_LAG_S, FrameEncoding, Worker
+from photoservo.record.files import default_path, rerun_cli, software_versions
 from photoservo.geometry import make_pose
 
 log = logging.getLogger(__name__)
@@ -97,40 +95,6 @@ class RecordingParams:
         if self.mode == "preview" and self.video == "none":
             raise InputError(f"config key '{where}.video': \"none\" leaves a preview recording "
                              "nothing of the frames; choose av1 or h264")
-
-
-def default_path(verb: str, logs_dir: str | Path = "logs", now: datetime | None = None) -> Path:
-    """`logs/<UTC timestamp>_<verb>.rrd`, e.g. logs/20261122T043700Z_track.rrd (`_2`, `_3`, ...
-    appended when that name is taken)."""
-    now = now or datetime.now(UTC)
-    stem = f"{now.strftime('%Y%m%dT%H%M%SZ')}_{verb}"
-    p = Path(logs_dir) / f"{stem}.rrd"
-    n = 2
-    while p.exists():
-        p, n = Path(logs_dir) / f"{stem}_{n}.rrd", n + 1
-    return p
-
-
-def rerun_cli() -> Path:
-    """The `rerun` executable the rerun-sdk wheel installs beside this Python."""
-    return Path(sys.executable).parent / "rerun"
-
-
-def verify_rrd(path: str | Path, timeout_s: float = 120.0) -> tuple[bool, str]:
-    """Run `rerun rrd verify PATH` (footer check on): (passed, the CLI's last output line)."""
-    r = subprocess.run([str(rerun_cli()), "rrd", "verify", str(path)], check=False,
-                       capture_output=True, text=True, timeout=timeout_s)
-    lines = [s for s in (r.stdout + r.stderr).splitlines() if s.strip()]
-    return r.returncode == 0, (lines[-1] if lines else "")
-
-
-def software_versions() -> dict[str, str]:
-    """Versions that decide whether a replay can reproduce a run."""
-    import cv2
-
-    from photoservo import __version__
-    return {"photoservo": __version__, "python": platform.python_version(),
-            "numpy": np.__version__, "opencv": cv2.__version__, "rerun": rr.__version__}
 
 
 class Recorder:
