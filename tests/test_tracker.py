@@ -10,14 +10,15 @@ from photoservo.config import load_config
 from photoservo.sim.run import build_sim
 from photoservo.vision.pose_search import GeneSpace
 from photoservo.vision.fitness import stereo_hue
-from photoservo.sim.renderer import Scene
+from photoservo.sim.renderer import Foam, Scene
+from photoservo.vision.estimator import acquisition, estimate
 from photoservo.vision.tracker import Tracker, on_plane
 
 
 @pytest.fixture(scope="module")
 def sim():
     cfg = load_config(overrides=["sim.drift_mm_s=[0.0, 0.0]", "sim.heave_mm=0.0", "sim.roll_deg=0.0",
-                                 "sim.pitch_deg=0.0"])
+                                 "sim.pitch_deg=0.0", "tracker.water_z_mm=-100.0"])
     return cfg, build_sim(cfg)
 
 
@@ -37,46 +38,112 @@ def test_on_plane_genes_lie_on_the_water_and_face_up(sim):
     assert np.allclose(normal_base, [0, 0, -1], atol=1e-6)  # model z down into the water
 
 
-def _frames(cfg, s, t, empty=False):
+def _frames(cfg, s, t, empty=False, foam=False, shift_mm=(0.0, 0.0)):
+    """A stereo frame of the still scene at time t from the arm's start pose, the cameras moved
+    horizontally by shift_mm (base frame); empty water, or foam over the whole creature."""
     T = pa10.fk(s.q0) @ s.rig.T_flange_left()
+    T[:2, 3] += shift_mm
     scene = s.scene
-    if empty:
-        water = scene.scene(t).water
-        left, right = (scene.renderer.render(Scene(water=water), scene.T_world_base @ T, t, water_stride=4))
-    else:
-        left, right = scene.render(T, t, T, t)
+    sc = scene.scene(t)
+    if empty or foam:
+        T_m = scene.T_world_base @ scene.motion.pose(t)
+        cover = Foam(np.array([[T_m[0, 3], T_m[1, 3], 0.8 * max(scene.size_mm())]]), seed=1) if foam else None
+        sc = Scene(water=sc.water, target=None if empty else sc.target, foam=cover)
+    left, right = scene.renderer.render(sc, scene.T_world_base @ T, t, water_stride=4)
     return stereo_hue(left, right, cfg.fitness), left, right, T
 
 
-def test_tracker_follows_loses_after_n_misses_and_reacquires(sim):
+def _run(tr, cfg, s, t0, n, **kw):
+    return [tr.update(*_frames(cfg, s, t0 + k / 30, **kw), t0 + k / 30) for k in range(n)]
+
+
+def _tracker(cfg, s):
+    return Tracker.from_config(s.scene.model, s.rig, cfg, seed=1, time_budget=False)
+
+
+def _err(tk, s, t):
+    return float(np.linalg.norm(tk.T_base_model[:3, 3] - s.scene.motion.pose(t)[:3, 3]))
+
+
+def test_acquisition_is_spread_over_frames_then_tracks(sim):
+    """The whole-volume search runs acquire_generations of its generations per frame (a step
+    may finish a refinement past it), no pose meanwhile; then tracking, on the creature."""
     cfg, s = sim
-    tr = Tracker.from_config(s.scene.model, s.rig, cfg, seed=1, time_budget=False)
-    truth = s.scene.motion.pose(0.0)[:3, 3]
-    statuses = []
-    for k in range(4):
-        tk = tr.update(*_frames(cfg, s, k / 30), k / 30)
-        statuses.append(tk.status)
-    assert statuses == ["tracking"] * 4 and tr.acquisitions == 1
-    assert np.linalg.norm(tk.T_base_model[:3, 3] - truth) < 15.0
-    assert tk.alpha == pytest.approx(cfg.sim.alpha_px_per_mm, rel=0.05)
-    for k in range(4, 4 + cfg.tracker.lost_frames):  # the target vanishes (empty water)
-        tk = tr.update(*_frames(cfg, s, k / 30, empty=True), k / 30)
-        assert not tk.found
-    assert tk.status == "lost"
-    tk = tr.update(*_frames(cfg, s, 1.0), 1.0)
-    assert tk.status == "tracking" and tr.acquisitions == 2
-    assert np.linalg.norm(tk.T_base_model[:3, 3] - truth) < 15.0
-    assert math.isfinite(tk.fitness)
+    tr = _tracker(cfg, s)
+    tracks = _run(tr, cfg, s, 0.0, 10)
+    first = next(k for k, tk in enumerate(tracks) if tk.status == "tracking")
+    assert first >= 2, [tk.acquire_generations for tk in tracks]
+    assert all(tk.status == "acquiring" and tk.T_base_model is None and tk.acquire_generations >= 1
+               and tk.generations == 0 for tk in tracks[:first])
+    assert sum(tk.acquire_generations >= cfg.tracker.acquire_generations for tk in tracks[:first]) >= first - 1
+    assert all(tk.status == "tracking" and tk.acquire_generations == 0 for tk in tracks[first + 1:])
+    assert tr.acquisitions == 1 and _err(tracks[-1], s, tracks[-1].t) < 15.0
+    assert tracks[-1].alpha == pytest.approx(cfg.sim.alpha_px_per_mm, rel=0.05)
+
+
+def test_spread_acquisition_finds_what_estimate_finds(sim):
+    """`estimator.acquisition` stopped and resumed between any steps ends where `estimate` does."""
+    cfg, s = sim
+    hue, left, right, _ = _frames(cfg, s, 0.0)
+    args = (s.scene.model, left, right, s.rig, cfg.ga, cfg.estimator, cfg.fitness)
+    steps = acquisition(*args, hue, seed=7)
+    sizes = []
+    while True:
+        try:
+            sizes.append(next(steps))
+        except StopIteration as end:
+            done = end.value
+            break
+    est = estimate(*args, seed=7, frame=hue)
+    d, c = done.results[0]
+    assert est.found and d.passed and len(sizes) > 20 and set(sizes[:20]) == {1}
+    assert np.array_equal(c.position_mm, est.position_mm) and c.alpha == est.alpha_px_per_mm
+
+
+def test_hidden_creature_is_lost_then_found_again_near_its_track(sim):
+    """Foam over the creature: coasting, then lost after lost_frames misses (no pose for the
+    arm); once the foam goes, the search around the track has it back on the first frame,
+    without a whole-volume search."""
+    cfg, s = sim
+    tr = _tracker(cfg, s)
+    _run(tr, cfg, s, 0.0, 8)
+    n = cfg.tracker.lost_frames
+    hidden = _run(tr, cfg, s, 0.3, n + 4, foam=True)
+    assert [tk.status for tk in hidden[:n - 1]] == ["coasting"] * (n - 1)
+    assert all(tk.status == "lost" and tk.T_base_model is None and not tk.found for tk in hidden[n - 1:])
+    assert all(tk.acquire_generations == 0 for tk in hidden)  # no target-hue blob anywhere: nothing to acquire
+    back = _run(tr, cfg, s, 1.0, 3)
+    assert [tk.status for tk in back] == ["tracking"] * 3 and tr.acquisitions == 1
+    assert _err(back[-1], s, 1.0) < 15.0
+
+
+def test_creature_leaving_the_view_is_out_of_view_then_found_again(sim):
+    """The cameras move away until the creature is out of the right image: out_of_view with no
+    pose (never one off the water); back in view, the whole volume finds it again."""
+    cfg, s = sim
+    tr = _tracker(cfg, s)
+    _run(tr, cfg, s, 0.0, 8)
+    away = [tr.update(*_frames(cfg, s, 0.3, shift_mm=(0.0, -25.0 * k)), 0.3 + k / 30) for k in range(12)]
+    statuses = [tk.status for tk in away]
+    assert statuses[0] == "tracking" and statuses[-3:] == ["out_of_view"] * 3, statuses
+    assert all(abs(tk.T_base_model[2, 3] - cfg.sim.water_z_mm) < 40.0 for tk in away if tk.T_base_model is not None)
+    assert all(tk.T_base_model is None for tk in away if tk.status == "out_of_view")
+    back = _run(tr, cfg, s, 1.0, 10)
+    first = next(k for k, tk in enumerate(back) if tk.status == "tracking")
+    assert first <= 6 and all(tk.status == "tracking" for tk in back[first:]) and tr.acquisitions == 2
+    assert _err(back[-1], s, 1.0) < 15.0
 
 
 def test_max_generations_caps_a_tracking_frame(sim):
     """Replay of a real-time run passes each frame's recorded generation count."""
     cfg, s = sim
-    tr = Tracker.from_config(s.scene.model, s.rig, cfg, seed=1, time_budget=False)
-    tr.update(*_frames(cfg, s, 0.0), 0.0, max_generations=3)  # acquisition: the cap does not apply
-    assert tr.search is not None
-    assert tr.update(*_frames(cfg, s, 1 / 30), 1 / 30, max_generations=3).generations == 3
-    assert tr.update(*_frames(cfg, s, 2 / 30), 2 / 30).generations == cfg.tracker.generations_per_frame
+    tr = _tracker(cfg, s)
+    k = 0
+    while tr.search is None:  # the whole-volume search: the cap does not apply
+        tr.update(*_frames(cfg, s, k / 30), k / 30, max_generations=3)
+        k += 1
+    assert tr.update(*_frames(cfg, s, k / 30), k / 30, max_generations=3).generations == 3
+    assert tr.update(*_frames(cfg, s, (k + 1) / 30), (k + 1) / 30).generations == cfg.tracker.generations_per_frame
 
 
 def test_water_gate_plane_and_tilt():

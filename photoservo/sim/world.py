@@ -18,10 +18,12 @@ from photoservo.errors import InputError
 from photoservo.fileio import read_image
 from photoservo.geometry import axis_rotation
 from photoservo.vision.photo_model import PhotoModelParams, build_photo_model
+from photoservo.vision.measurement import visible_shares
 from photoservo.vision.rig import Rig
 from photoservo.sim.specimens import specimen
 from photoservo.sim.renderer import (
     CameraEffects,
+    Foam,
     Scene,
     StereoRenderer,
     calm_water,
@@ -30,6 +32,7 @@ from photoservo.sim.renderer import (
 )
 
 FACE_UP = np.diag([1.0, -1.0, -1.0])  # Rx(180 deg): model z down into the water
+OCCLUSION_RADIUS = 0.8  # `[sim] occlusion_s` foam: patch radius per creature length (covers it to the tips)
 
 
 @dataclass(frozen=True)
@@ -58,8 +61,13 @@ class SimParams:
     start_offset_mm: float  # arm starts this far (horizontally) from the desired pose (mm)
     start_yaw_deg: float  # ... and yawed this much from it (deg)
     lockstep: bool  # true: simulated clock (deterministic); false: real time
+    occlusion_s: tuple[float, ...]  # [t0, t1]: foam over the creature from t0 to t1 (s); [] = never
 
     def validate(self, where: str) -> None:
+        occ = self.occlusion_s
+        if len(occ) not in (0, 2) or (len(occ) == 2 and not 0.0 <= occ[0] < occ[1]):
+            raise InputError(f"config key '{where}.occlusion_s' must be [] or [t0, t1] with 0 <= t0 < t1 (s), "
+                             f"got {list(occ)}")
         if self.alpha_px_per_mm <= 0:
             raise InputError(f"config key '{where}.alpha_px_per_mm' must be > 0, got {self.alpha_px_per_mm}")
         for name in ("heave_period_s", "roll_period_s", "pitch_period_s", "camera_fps"):
@@ -153,15 +161,34 @@ class SimScene:
     def size_mm(self) -> tuple[float, float]:
         return self.model.size_mm(self.p.alpha_px_per_mm)
 
+    def occluded(self, t: float) -> bool:
+        """Foam covers the creature at time t (s): `[sim] occlusion_s`."""
+        occ = self.p.occlusion_s
+        return len(occ) == 2 and occ[0] <= t < occ[1]
+
     def scene(self, t: float) -> Scene:
-        target = floater_from_model(self.photo, self.model, self.p.alpha_px_per_mm,
-                                    self.T_world_base @ self.motion.pose(t))
+        T_world_model = self.T_world_base @ self.motion.pose(t)
+        target = floater_from_model(self.photo, self.model, self.p.alpha_px_per_mm, T_world_model)
         distractors: tuple = ()
         if self.distractor_motion is not None:
             distractors = (floater_from_model(self.distractor_photo, self.distractor_model,
                                               self.p.alpha_px_per_mm,
                                               self.T_world_base @ self.distractor_motion.pose(t)),)
-        return Scene(water=self.water, target=target, distractors=distractors)
+        foam = None
+        if self.occluded(t):  # one foam patch over the whole creature, drifting with it
+            radius = OCCLUSION_RADIUS * max(self.size_mm())
+            foam = Foam(np.array([[T_world_model[0, 3], T_world_model[1, 3], radius]]), seed=self.p.seed)
+        return Scene(water=self.water, target=target, distractors=distractors, foam=foam)
+
+    def in_view(self, T_base_left: np.ndarray, t: float) -> float:
+        """Truth (issue 10 scores): the share of the creature's inner points S_in inside BOTH
+        images at time t (s) with the left camera at T_base_left (4x4, base frame, mm): the
+        smaller of the two cameras' shares (vision/measurement.py `visible_shares`); 1.0 = fully
+        in both views. Foam does not change it (`occluded` says when foam hides it)."""
+        T = np.linalg.inv(T_base_left) @ self.motion.pose(t)
+        if T[2, 3] <= 1.0:
+            return 0.0
+        return min(visible_shares(T[:3, :3], T[:3, 3], self.p.alpha_px_per_mm, self.model, self.rig))
 
     def render(self, T_base_left: np.ndarray, t_left: float, T_base_left_at_right: np.ndarray,
                t_right: float) -> tuple[np.ndarray, np.ndarray]:

@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import dataclasses
 import time
+from collections.abc import Generator
 from dataclasses import dataclass, field
 from typing import Literal
 
@@ -37,7 +38,7 @@ from photoservo.vision.fitness import FitnessParams, StereoHue, stereo_hue
 from photoservo.vision.ga import GAParams
 from photoservo.vision.hue_layout import layout_pairs
 from photoservo.vision.photo_model import HUE_BINS, PhotoModel
-from photoservo.vision.pose_search import Candidate, PoseSearch
+from photoservo.vision.pose_search import Candidate, PoseSearch, drive
 from photoservo.vision.rig import Rig
 from photoservo.vision.seeding import ModelShape, blob_pairs, group_pairs, seed_genes
 from photoservo.vision.silhouette import silhouette_pairs
@@ -152,10 +153,11 @@ class Estimate:
 
 
 def _islands(model: PhotoModel, rig: Rig, frame: StereoHue, ga_params: GAParams, p: EstimatorParams,
-             fit_params: FitnessParams, ss: np.random.SeedSequence) -> list[tuple[str, PoseSearch]]:
+             fit_params: FitnessParams, ss: np.random.SeedSequence,
+             seeded_only: bool = False) -> list[tuple[str, PoseSearch]]:
     """The acquisition's GA islands (module docstring): one per seed pair, at most
     max_candidates, largest first; an unseeded one over the whole volume when asked or when
-    nothing seeds."""
+    nothing seeds (never with `seeded_only`)."""
     islands: list[tuple[str, PoseSearch]] = []
     if p.seeding and p.genes == "image":
         shape = ModelShape.of(model)
@@ -180,10 +182,59 @@ def _islands(model: PhotoModel, rig: Rig, frame: StereoHue, ga_params: GAParams,
             search.ga.set_region(region)
             search.ga.genes[:] = seeds
             islands.append((f"blob {i}", search))
-    if p.global_island or not islands:
+    if (p.global_island or not islands) and not seeded_only:
         rng = np.random.default_rng(ss.spawn(1)[0])
         islands.append(("global", PoseSearch(model, rig, frame, ga_params, p, fit_params, rng)))
     return islands
+
+
+@dataclass(frozen=True)
+class Acquired:
+    """What an acquisition ends with: every island's best with its detection test, passing
+    first, then by contrast and fitness; the islands (their generations and evaluations)."""
+
+    results: list[tuple[Detection, Candidate]]
+    islands: list[tuple[str, PoseSearch]]
+
+
+def acquisition(model: PhotoModel, left_bgr: np.ndarray, right_bgr: np.ndarray, rig: Rig, ga_params: GAParams,
+                p: EstimatorParams, fit_params: FitnessParams, frame: StereoHue, seed: int = 0,
+                seeded_only: bool = False) -> Generator[int, None, Acquired]:
+    """The acquisition from the whole volume (module docstring) in steps: yields the GA
+    generations each step ran (one island generation, or one of the leading island's
+    refinements: its twins, the stereo plane fit, the per-axis size) and returns the ranked
+    candidates. `estimate` runs it to its end on one frame; the tracker runs a share of it per
+    camera frame (vision/tracker.py). `seeded_only`: no unseeded island over the whole volume
+    (no candidate at all when nothing seeds)."""
+    ss = np.random.SeedSequence(seed)
+    islands = _islands(model, rig, frame, ga_params, p, fit_params, ss, seeded_only)
+    if not islands:
+        return Acquired([], [])
+    firsts = []
+    for _, search in islands:
+        firsts.append((yield from search.steps()))
+    # the look-alike twins (mirror, heading + 180 deg) are tried for the leading island only
+    lead = int(np.argmax([c.fitness for c in firsts]))
+    search = islands[lead][1]
+    g0 = search.ga.generation
+    firsts[lead] = search.resolve_twins(firsts[lead])
+    yield search.ga.generation - g0
+    if p.plane_refine and np.isfinite(firsts[lead].fitness):
+        g0 = search.ga.generation
+        firsts[lead] = search.refine_tilt(firsts[lead], left_bgr, right_bgr)
+        yield search.ga.generation - g0
+    if p.aspect_max > 1.0 and np.isfinite(firsts[lead].fitness):
+        g0 = search.ga.generation
+        c = search.refine_aspect(firsts[lead], p.aspect_max)
+        if c.fitness >= firsts[lead].fitness + p.aspect_min_gain:
+            firsts[lead] = c
+        yield search.ga.generation - g0
+    results = []
+    for (name, search), c in zip(islands, firsts):
+        if np.isfinite(c.fitness):
+            results.append((detect(c, model, frame, rig, fit_params, p, seed=seed), dataclasses.replace(c, source=name)))
+    results.sort(key=lambda dc: (-dc[0].standing, -dc[1].fitness))
+    return Acquired(results, islands)
 
 
 def estimate(model: PhotoModel, left_bgr: np.ndarray, right_bgr: np.ndarray, rig: Rig,
@@ -197,26 +248,9 @@ def estimate(model: PhotoModel, left_bgr: np.ndarray, right_bgr: np.ndarray, rig
             raise InputError(f"{name} image is {img.shape[1]}x{img.shape[0]} px but the rig's "
                              f"[{name}] size is {cam.width}x{cam.height}")
     frame = frame or stereo_hue(left_bgr, right_bgr, fit_params)
-    ss = np.random.SeedSequence(seed)
-    p = est_params
-    islands = _islands(model, rig, frame, ga_params, p, fit_params, ss)
-    results = []
-    evaluations = 0
-    firsts = [search.run(ambiguity_check=False) for _, search in islands]
-    # the look-alike twins (mirror, heading + 180 deg) are tried for the leading island only
-    lead = int(np.argmax([c.fitness for c in firsts]))
-    firsts[lead] = islands[lead][1].resolve_twins(firsts[lead])
-    if p.plane_refine and np.isfinite(firsts[lead].fitness):
-        firsts[lead] = islands[lead][1].refine_tilt(firsts[lead], left_bgr, right_bgr)
-    if p.aspect_max > 1.0 and np.isfinite(firsts[lead].fitness):
-        c = islands[lead][1].refine_aspect(firsts[lead], p.aspect_max)
-        if c.fitness >= firsts[lead].fitness + p.aspect_min_gain:
-            firsts[lead] = c
-    for (name, search), c in zip(islands, firsts):
-        evaluations += search.ga.evaluations
-        if np.isfinite(c.fitness):
-            results.append((detect(c, model, frame, rig, fit_params, p, seed=seed), dataclasses.replace(c, source=name)))
-    results.sort(key=lambda dc: (-dc[0].standing, -dc[1].fitness))
+    done = drive(acquisition(model, left_bgr, right_bgr, rig, ga_params, est_params, fit_params, frame, seed))
+    results, islands = done.results, done.islands
+    evaluations = sum(search.ga.evaluations for _, search in islands)
     cands = tuple(_candidate_json(c, d, model) for d, c in results)
     seconds = time.perf_counter() - t0
     if not results or not results[0][0].passed:

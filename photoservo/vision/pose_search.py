@@ -32,8 +32,9 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from collections.abc import Generator
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Literal
+from typing import TYPE_CHECKING, Literal, TypeVar
 
 import cv2
 import numpy as np
@@ -50,6 +51,8 @@ from photoservo.vision.stereo_plane import align_to_plane, fit_target_plane, gre
 
 if TYPE_CHECKING:
     from photoservo.vision.estimator import EstimatorParams
+
+T = TypeVar("T")
 
 GENE_NAMES = {
     "image": ("u_px", "v_px", "q_per_m", "psi", "tilt_x", "tilt_y", "ln_s"),
@@ -310,14 +313,21 @@ class PoseSearch:
         short GA of its own in a narrow window around it (`alternatives`): the mirror of the
         planar pose ambiguity (normal reflected about the line of sight), the heading turned by
         180 degrees, and both. A twin that scores higher replaces the pose."""
+        best = drive(self.steps())
+        return self.resolve_twins(best) if ambiguity_check else best
+
+    def steps(self) -> Generator[int, None, Candidate]:
+        """`run` without the ambiguity check, one generation per step: yields 1 after each
+        generation (a caller may stop between any two and go on later: the tracker spreads an
+        acquisition over camera frames, vision/tracker.py) and returns the best pose."""
         p = self.est_params
         conv = Convergence(p)
         for _ in range(p.max_generations):
             c = self.step(1)
+            yield 1
             if conv.update(c.fitness, c.R, c.position_mm, c.alpha):
                 break
-        best = self.best()
-        return self.resolve_twins(best) if ambiguity_check else best
+        return self.best()
 
     def local_search(self, R: np.ndarray, t: np.ndarray, alpha: float, position_frac: float, heading_deg: float,
                      tilt_deg: float, alpha_frac: float) -> Candidate:
@@ -402,6 +412,15 @@ class PoseSearch:
         if c.fitness >= best.fitness - self.est_params.plane_fitness_tol:
             return Candidate(c.R, c.position_mm, c.alpha, c.fitness, self.ga.generation, best.source)
         return best
+
+
+def drive(steps: Generator[int, None, T]) -> T:
+    """Run a stepwise search (`PoseSearch.steps`, `estimator.acquisition`) to its end; its result."""
+    while True:
+        try:
+            next(steps)
+        except StopIteration as done:
+            return done.value
 
 
 def alternatives(R: np.ndarray, t: np.ndarray) -> list[np.ndarray]:

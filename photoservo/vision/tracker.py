@@ -1,4 +1,4 @@
-"""Real-time multi-step GA tracking (method step 5, issue 5 "Tracking"), eye-in-hand.
+"""Real-time multi-step GA tracking (method step 5, issues 5 and 10), eye-in-hand.
 
 The cameras ride on the arm, so each frame comes with T_base_left — where the left camera was
 (in the arm's base frame, mm) when the frame was taken. The tracker keeps its population and its
@@ -8,14 +8,31 @@ time gives a search window, and a few GA generations run within a time budget. T
 back to the base frame and updates an alpha-beta filter (position, velocity) and a smoothed
 alpha (the creature's size does not change).
 
-Lost and re-acquisition: a frame whose best fitness is under the detection threshold is a miss
-(the fitness level that passed the estimator's image-relative detection at the last acquisition,
-`detection_threshold` of the chosen candidate: vision/detection.py);
-after `lost_frames` misses in a row the track is lost and the next frames run the full
-acquisition (`estimator.estimate`, blobs matched along epipolar lines). Among its candidates
-above the threshold the tracker takes, when it had a track before, the one whose size agrees
-with the track's (alpha within `size_tolerance`) and that lies nearest to the last track
-position; otherwise the best-scoring one.
+A frame's best pose is a measurement when its fitness reaches the detection threshold (the
+fitness level that passed the estimator's image-relative detection at the last acquisition,
+`detection_threshold` of the chosen candidate: vision/detection.py), at least `min_visible` of
+the model is in each image, it lies on known water (`water_gate`) and it is no jump faster than
+`max_speed_mm_s`; otherwise the frame is a miss. Status of a frame:
+
+  tracking     measured;
+  coasting     a miss, fewer than `lost_frames` in a row: the prediction stands in;
+  lost         `lost_frames` misses in a row while the predicted creature is in view (foam,
+               glare): no pose. The search stays around the predicted track first — its size is
+               known, so alpha stays within `window_alpha_frac`; the position window grows with
+               the time since the last measurement up to `search_window_mm`, the heading window
+               doubles; target-hue blob pairs near the prediction are seeded with the track's
+               orientation and size. Blob pairs only farther away start the whole-volume search;
+  out_of_view  the predicted creature is less than `min_visible` in either image: it left the
+               view; no pose. The whole volume is searched;
+  acquiring    no track yet: the whole volume is searched.
+
+The whole-volume search is `estimator.acquisition` — the acquisition of `photoservo estimate`,
+blobs matched along epipolar lines, islands, twins and refinements, the same answer for the same
+seed — spread over frames: each frame runs `acquire_generations` of its GA generations (a fixed
+count, so a replay runs the same search), on the frame it started on (the creature was seen
+there). When it ends, the candidates that passed detection are filtered, with a track before,
+to those of the track's size (alpha within `size_tolerance`), and the one nearest the prediction
+at that frame's time is the measurement; the tracking search restarts around it.
 
 Pure: arrays in, arrays out; time is whatever clock the caller stamps frames with (s).
 """
@@ -24,27 +41,32 @@ from __future__ import annotations
 
 import math
 import time
+from collections.abc import Generator
 from dataclasses import dataclass
 from typing import Literal, Protocol
 
 import numpy as np
 
 from photoservo.errors import InputError
-from photoservo.vision.estimator import EstimatorParams, estimate
-from photoservo.vision.pose_search import PoseSearch
-from photoservo.vision.fitness import FitnessParams, StereoHue
-from photoservo.vision.ga import GAParams
-from photoservo.vision.photo_model import PhotoModel
 from photoservo.geometry import invert_pose, make_pose
+from photoservo.vision.detection import Detection
+from photoservo.vision.estimator import Acquired, EstimatorParams, acquisition
+from photoservo.vision.fitness import FitnessParams, StereoHue
+from photoservo.vision.ga import GAParams, Region
 from photoservo.vision.measurement import visible_shares, water_gate
+from photoservo.vision.photo_model import PhotoModel
+from photoservo.vision.pose_search import Candidate, PoseSearch
 from photoservo.vision.rig import Rig
+from photoservo.vision.seeding import BlobPair, blob_pairs
 
 Status = Literal["acquiring", "tracking", "coasting", "lost", "out_of_view"]
+DEPTH_GENE = 2  # the depth gene along the left camera's axis (inverse depth q, or z) in both codings
+HEAVE_HORIZON_S = 0.25  # known water: the vertical velocity (heave) is extrapolated this long at most (s)
 
 
 @dataclass(frozen=True)
 class TrackerParams:
-    """[tracker] config: the per-frame GA and the motion model."""
+    """[tracker] config: the per-frame GA, the motion model, the measurement tests, the search."""
 
     generations_per_frame: int  # most GA generations per camera frame
     time_budget_ms: float  # stop a frame's generations once this much time is spent (ms)
@@ -64,19 +86,20 @@ class TrackerParams:
     plane_margin_mm: float  # known water: a measured origin farther than this from the plane is a miss (mm)
     max_tilt_deg: float  # known water: a measured normal farther than this from the vertical is a miss (deg)
     min_visible: float  # share of S_in inside each image needed to measure; a prediction below: out_of_view
+    search_window_mm: float  # lost: the position window grows up to +- this across the view (mm)
+    acquire_generations: int  # whole-volume search: GA generations of it per camera frame
 
     def validate(self, where: str) -> None:
         w = f"{where}." if where else ""
-        if self.generations_per_frame < 1:
-            raise InputError(f"config key '{w}generations_per_frame': must be >= 1, got {self.generations_per_frame}")
-        if self.lost_frames < 1:
-            raise InputError(f"config key '{w}lost_frames': must be >= 1, got {self.lost_frames}")
+        for k in ("generations_per_frame", "lost_frames", "acquire_generations"):
+            if getattr(self, k) < 1:
+                raise InputError(f"config key '{w}{k}': must be >= 1, got {getattr(self, k)}")
         for k in ("gain_position", "gain_velocity", "gain_alpha"):
             if not 0.0 < getattr(self, k) <= 1.0:
                 raise InputError(f"config key '{w}{k}': must be in (0, 1], got {getattr(self, k)}")
         if self.plane_search and not math.isfinite(self.water_z_mm):
             raise InputError(f"config key '{w}plane_search': needs '{w}water_z_mm' (photoservo calibrate water)")
-        for k in ("time_budget_ms", "window_position_mm", "window_alpha_frac", "max_speed_mm_s"):
+        for k in ("time_budget_ms", "window_position_mm", "window_alpha_frac", "max_speed_mm_s", "search_window_mm"):
             if getattr(self, k) <= 0:
                 raise InputError(f"config key '{w}{k}': must be > 0, got {getattr(self, k)}")
 
@@ -88,17 +111,19 @@ class Track:
 
     t: float  # capture time of the frame (s)
     status: Status
-    found: bool  # this frame's best fitness passed the detection threshold
+    found: bool  # this frame's best pose passed every test: a measurement
     fitness: float
-    T_base_model: np.ndarray | None  # filtered target pose
+    T_base_model: np.ndarray | None  # filtered target pose (tracking and coasting only)
     velocity_mm_s: np.ndarray  # filtered target velocity (base frame)
     alpha: float | None  # filtered px/mm
     size_mm: tuple[float, float] | None
     R_left: np.ndarray | None
     t_left: np.ndarray | None
     alpha_measured: float | None
-    generations: int
+    generations: int  # GA generations of the tracking search this frame
     seconds: float
+    acquire_generations: int = 0  # GA generations of the whole-volume search this frame
+    t_measured: float | None = None  # capture time of the last measurement (s)
 
 
 class TrackerConfig(Protocol):
@@ -109,6 +134,27 @@ class TrackerConfig(Protocol):
     ga: GAParams
     estimator: EstimatorParams
     fitness: FitnessParams
+
+
+@dataclass
+class _Acquiring:
+    """A whole-volume search in progress (`estimator.acquisition`) and the frame it runs on."""
+
+    steps: Generator[int, None, Acquired]
+    frame: StereoHue
+    T_base_left: np.ndarray
+    t: float
+
+
+@dataclass(frozen=True)
+class _Measured:
+    """A frame's measurement: the pose in the left camera of the frame it was measured on, that
+    pose in the base frame, and the frame's capture time (s)."""
+
+    c: Candidate
+    T_base_model: np.ndarray
+    t: float
+    acquired: bool = False  # by the whole-volume search (on the frame it started on)
 
 
 class Tracker:
@@ -122,7 +168,8 @@ class Tracker:
         self.ga_params, self.est_params, self.fit_params = ga_params, est_params, fit_params
         self.ss = np.random.SeedSequence(seed)
         self.rng = np.random.default_rng(self.ss.spawn(1)[0])
-        self.search: PoseSearch | None = None
+        self.search: PoseSearch | None = None  # the tracking search (tracking, coasting, lost)
+        self.acquiring: _Acquiring | None = None  # the whole-volume search in progress
         self.status: Status = "acquiring"
         self.misses = 0
         self.frames = 0
@@ -130,7 +177,7 @@ class Tracker:
         self.v_base = np.zeros(3)
         self.R_base: np.ndarray | None = None
         self.alpha: float | None = None
-        self.t_last: float | None = None
+        self.t_last: float | None = None  # time of the last measurement
         self.T_base_left_last: np.ndarray | None = None
         self.acquisitions = 0
         self.threshold = math.inf  # fitness that counts as found: set by each acquisition
@@ -148,88 +195,126 @@ class Tracker:
     # ------------------------------------------------------------------ prediction
 
     def predict(self, t: float) -> np.ndarray | None:
-        """T_base_model predicted at time t (constant velocity; orientation held)."""
+        """T_base_model predicted at time t (constant velocity; orientation held). On known water
+        the vertical velocity (heave, an oscillation about the plane) is extrapolated for at most
+        HEAVE_HORIZON_S: a creature hidden for seconds still floats on the water."""
         if self.p_base is None or self.R_base is None or self.t_last is None:
             return None
+        dt = t - self.t_last
+        d = self.v_base * dt
+        if math.isfinite(self.p.water_z_mm):
+            d[2] = self.v_base[2] * min(dt, HEAVE_HORIZON_S)
         T = np.eye(4)
         T[:3, :3] = self.R_base
-        T[:3, 3] = self.p_base + self.v_base * (t - self.t_last)
+        T[:3, 3] = self.p_base + d
         return T
+
+    def _in_view(self, T_left_model: np.ndarray) -> bool:
+        """At least min_visible of the model inside both images at a pose in the left camera
+        (the track's alpha)."""
+        return T_left_model[2, 3] > 1.0 and min(visible_shares(
+            T_left_model[:3, :3], T_left_model[:3, 3], self.alpha, self.model, self.rig)) >= self.p.min_visible
 
     # ------------------------------------------------------------------ one frame
 
     def update(self, frame: StereoHue, left_bgr: np.ndarray, right_bgr: np.ndarray,
                T_base_left: np.ndarray, t: float, max_generations: int | None = None) -> Track:
         """Process one stereo frame captured at time t with the left camera at T_base_left.
-        `max_generations`: run at most this many GA generations on a tracking frame instead of
-        [tracker] generations_per_frame (replay of a real-time run: its recorded counts)."""
+        `max_generations`: run at most this many GA generations of the tracking search instead
+        of [tracker] generations_per_frame (replay of a real-time run: its recorded counts)."""
         t0 = time.perf_counter()
         self.frames += 1
         T_base_left = np.asarray(T_base_left, dtype=float)
         T_left_base = invert_pose(T_base_left)
-        if self.search is None:
-            cand = self._acquire(frame, left_bgr, right_bgr, T_base_left)
-            generations = 0 if cand is None else cand[4]
-        else:
-            cand = self._track_step(frame, T_base_left, T_left_base, t,
-                                    self.p.generations_per_frame if max_generations is None else max_generations)
-            generations = cand[4] if cand is not None else 0
+        T_new_old = None if self.T_base_left_last is None else T_left_base @ self.T_base_left_last
         self.T_base_left_last = T_base_left
-        measured = None
-        if cand is not None:
-            R_l, t_l, alpha_m, f, _ = cand
-            if f >= self.threshold:
-                T_bm = T_base_left @ make_pose(R_l, t_l)
-                p = self.p
-                seen = min(visible_shares(R_l, t_l, alpha_m, self.model, self.rig))
-                if (self._plausible(T_bm[:3, 3], t) and seen >= p.min_visible
-                        and not water_gate(T_bm, p.water_z_mm, p.plane_margin_mm, p.max_tilt_deg)):
-                    measured = (R_l, t_l, alpha_m, f, T_bm)
-        fitness = float(cand[3]) if cand is not None else float("-inf")
-        if measured is not None:
-            self._correct(measured[4], measured[2], t)
-            self.misses = 0
-            self.status = "tracking"
+        m, best, n, far = None, None, 0, False
+        if self.search is not None:
+            near, far = self._pairs(frame, T_left_base, t)
+            best, n = self._track_step(frame, T_left_base, T_new_old, t,
+                                       self.p.generations_per_frame if max_generations is None else max_generations,
+                                       near)
+            if best is not None and self._measurement(best, T_base_left, t):
+                m = _Measured(best, T_base_left @ make_pose(best.R, best.position_mm), t)
+        n_acq = 0
+        if m is None and (self.search is None or far or self.acquiring is not None):
+            m, n_acq = self._acquire_step(frame, left_bgr, right_bgr, T_base_left, t)
+            if m is not None:
+                self._restart_search(frame, T_left_base @ m.T_base_model, m.c.alpha)
+        if m is not None:
+            self.acquiring = None
+            self._accept(m)
         else:
-            self.misses += 1
-            T_pred = self.predict(t)
-            T_lp = None if T_pred is None else T_left_base @ T_pred
-            if T_lp is not None and (T_lp[2, 3] <= 1.0 or min(visible_shares(
-                    T_lp[:3, :3], T_lp[:3, 3], self.alpha, self.model, self.rig)) < self.p.min_visible):
-                self.status = "out_of_view"  # the predicted creature left the view: never a pose
-                self.search = None
-            elif self.search is not None and self.misses >= self.p.lost_frames:
-                self.status = "lost"
-                self.search = None  # next frame re-acquires from the full volume
-            elif self.search is not None:
-                self.status = "coasting"
-            else:
-                self.status = "acquiring" if self.p_base is None else "lost"
-        T_pred = self.predict(t) if self.status in ("tracking", "coasting") else None
+            self._miss(t, T_left_base)
+        c = None if m is None else _in_camera(m, T_left_base)
+        fitness = float(m.c.fitness if m is not None else best.fitness if best is not None else -math.inf)
         return Track(
-            t=t, status=self.status, found=measured is not None, fitness=fitness,
-            T_base_model=T_pred, velocity_mm_s=self.v_base.copy(),
+            t=t, status=self.status, found=m is not None, fitness=fitness,
+            T_base_model=self.predict(t) if self.status in ("tracking", "coasting") else None,
+            velocity_mm_s=self.v_base.copy(),
             alpha=self.alpha, size_mm=None if self.alpha is None else self.model.size_mm(self.alpha),
-            R_left=None if measured is None else measured[0], t_left=None if measured is None else measured[1],
-            alpha_measured=None if measured is None else measured[2],
-            generations=generations, seconds=time.perf_counter() - t0,
+            R_left=None if c is None else c.R, t_left=None if c is None else c.position_mm,
+            alpha_measured=None if c is None else c.alpha, generations=n, seconds=time.perf_counter() - t0,
+            acquire_generations=n_acq, t_measured=self.t_last,
         )
+
+    def _measurement(self, c: Candidate, T_base_left: np.ndarray, t: float, jump: bool = True) -> bool:
+        """Is a frame's best pose (left camera of the frame at T_base_left, time t) a
+        measurement: detection threshold, visibility, the water plane, no jump (`jump`)."""
+        if not c.fitness >= self.threshold:
+            return False
+        T_bm = T_base_left @ make_pose(c.R, c.position_mm)
+        p = self.p
+        if min(visible_shares(c.R, c.position_mm, c.alpha, self.model, self.rig)) < p.min_visible:
+            return False
+        if water_gate(T_bm, p.water_z_mm, p.plane_margin_mm, p.max_tilt_deg):
+            return False
+        return not jump or self._plausible(T_bm[:3, 3], t)
 
     def _plausible(self, p: np.ndarray, t: float) -> bool:
         """A measurement further from the prediction than max_speed allows is a miss."""
-        if self.p_base is None or self.t_last is None or self.search is None:
+        if self.p_base is None or self.t_last is None:
             return True
         dt = max(t - self.t_last, 1e-3)
         pred = self.p_base + self.v_base * dt
         return float(np.linalg.norm(p - pred)) <= (self.p.max_speed_mm_s + self.p.window_growth_mm_s) * dt \
             + self.p.window_position_mm
 
-    def _correct(self, T_bm: np.ndarray, alpha_m: float, t: float) -> None:
-        """Alpha-beta update of position/velocity, orientation taken as measured, alpha smoothed."""
+    # ------------------------------------------------------------------ status
+
+    def _accept(self, m: _Measured) -> None:
+        """A measurement: tracking. Found again after a loss, the position is taken as measured
+        (the prediction is old) and the velocity kept; after leaving the view, or by the
+        whole-volume search, the motion model starts afresh."""
+        if self.status == "out_of_view" or m.acquired:
+            self.p_base, self.t_last, self.v_base = None, None, np.zeros(3)
+        self._correct(m.T_base_model, m.c.alpha, m.t, restart=self.status == "lost")
+        self.misses = 0
+        self.status = "tracking"
+
+    def _miss(self, t: float, T_left_base: np.ndarray) -> None:
+        self.misses += 1
+        T_pred = self.predict(t)
+        if T_pred is None:
+            self.status = "acquiring"
+        elif not self._in_view(T_left_base @ T_pred):
+            self.status = "out_of_view"  # the predicted creature left the view: never a pose
+            self.search = None  # the whole volume is searched for its return
+        elif self.search is not None and self.misses < self.p.lost_frames:
+            self.status = "coasting"
+        else:
+            self.status = "lost"  # the search stays around the predicted track
+
+    def _correct(self, T_bm: np.ndarray, alpha_m: float, t: float, restart: bool = False) -> None:
+        """Alpha-beta update of position/velocity, orientation taken as measured, alpha smoothed;
+        `restart`: the position taken as measured, the velocity kept."""
         p_m = T_bm[:3, 3]
         if self.p_base is None or self.t_last is None:
             self.p_base, self.v_base = p_m.copy(), np.zeros(3)
             self.alpha = float(alpha_m)
+        elif restart:
+            self.p_base = p_m.copy()
+            self.alpha = float(self.alpha + self.p.gain_alpha * (alpha_m - self.alpha))
         else:
             dt = max(t - self.t_last, 1e-6)
             pred = self.p_base + self.v_base * dt
@@ -240,52 +325,97 @@ class Tracker:
         self.R_base = T_bm[:3, :3].copy()
         self.t_last = t
 
-    # ------------------------------------------------------------------ acquisition
+    # ------------------------------------------------------------------ whole-volume search
 
-    def _acquire(self, frame: StereoHue, left_bgr: np.ndarray, right_bgr: np.ndarray,
-                 T_base_left: np.ndarray):
-        """Full-volume acquisition; choose the candidate (see module docstring)."""
-        self.acquisitions += 1
-        seed = int(self.ss.spawn(1)[0].generate_state(1)[0])
-        est = estimate(self.model, left_bgr, right_bgr, self.rig, self.ga_params, self.est_params,
-                       self.fit_params, seed=seed, frame=frame)
-        cands = [c for c in est.candidates if c["found"]]  # passed the estimator's detection tests
-        if not cands:
-            self.threshold = math.inf  # nothing passed: not found
-            best = est.candidates[0] if est.candidates else None
-            if best is None:
-                return None
-            return (np.array(best["rotation"]), np.array(best["position_mm"]), best["alpha_px_per_mm"],
-                    best["fitness"], est.generations)
-        if self.alpha is not None and self.p_base is not None:
-            ok = [c for c in cands if abs(c["alpha_px_per_mm"] / self.alpha - 1.0) <= self.p.size_tolerance]
-            pool = ok or cands
+    def _acquire_step(self, frame: StereoHue, left_bgr: np.ndarray, right_bgr: np.ndarray,
+                      T_base_left: np.ndarray, t: float) -> tuple[_Measured | None, int]:
+        """This frame's share of the whole-volume search: starts one on this frame when none
+        runs and runs acquire_generations of its GA generations. Once it ends, its chosen
+        candidate (`_choose`) measured on the frame it started on, if it passes the tests.
+        Returns (measurement or None, generations run)."""
+        if self.acquiring is None:
+            seed = int(self.ss.spawn(1)[0].generate_state(1)[0])
+            steps = acquisition(self.model, left_bgr, right_bgr, self.rig, self.ga_params, self.est_params,
+                                self.fit_params, frame, seed, seeded_only=True)
+            self.acquiring = _Acquiring(steps, frame, T_base_left, t)
+        a = self.acquiring
+        n = 0
+        try:
+            while n < self.p.acquire_generations:
+                n += next(a.steps)
+        except StopIteration as end:
+            self.acquiring = None
+            self.acquisitions += bool(end.value.islands)  # a search ran (a frame without blob pairs has none)
+            chosen = self._choose(end.value.results, a.T_base_left, a.t)
+            if chosen is not None:
+                d, c = chosen
+                self.threshold = d.threshold
+                if self._measurement(c, a.T_base_left, a.t, jump=False):
+                    return _Measured(c, a.T_base_left @ make_pose(c.R, c.position_mm), a.t, acquired=True), n
+        return None, n
 
-            def dist(c: dict) -> float:
-                p = T_base_left[:3, :3] @ np.array(c["position_mm"]) + T_base_left[:3, 3]
-                return float(np.linalg.norm(p - self.p_base))
-            chosen = min(pool, key=dist)
-        else:
-            chosen = cands[0]
-        R, tl, a = np.array(chosen["rotation"]), np.array(chosen["position_mm"]), float(chosen["alpha_px_per_mm"])
-        self.threshold = float(chosen["detection_threshold"])
-        self.search = PoseSearch(self.model, self.rig, frame, self.ga_params, self.est_params,
-                                 self.fit_params, self.rng)
-        self._window(R, tl, a)
-        self.search.seed(R, tl, np.array([a]))
-        if self.p_base is not None:  # a re-acquisition restarts the motion model's velocity
-            self.v_base = np.zeros(3)
-            self.p_base, self.t_last = None, None
-        return (R, tl, a, float(chosen["fitness"]), est.generations)
+    def _choose(self, results: list[tuple[Detection, Candidate]], T_base_left: np.ndarray,
+                t: float) -> tuple[Detection, Candidate] | None:
+        """Among the candidates that passed detection (left camera at T_base_left, time t): with
+        a track before, only those of its size (alpha within size_tolerance), the nearest to its
+        prediction; without one, the best."""
+        passed = [(d, c) for d, c in results if d.passed]
+        T_pred = self.predict(t)
+        if self.alpha is None or T_pred is None or not passed:
+            return passed[0] if passed else None
+        same = [(d, c) for d, c in passed if abs(c.alpha / self.alpha - 1.0) <= self.p.size_tolerance]
 
-    # ------------------------------------------------------------------ tracking
+        def dist(dc: tuple[Detection, Candidate]) -> float:
+            p = T_base_left[:3, :3] @ dc[1].position_mm + T_base_left[:3, 3]
+            return float(np.linalg.norm(p - T_pred[:3, 3]))
+        return min(same, key=dist) if same else None
+
+    def _pairs(self, frame: StereoHue, T_left_base: np.ndarray, t: float) -> tuple[list[BlobPair], bool]:
+        """Lost: the frame's target-hue blob pairs near the predicted track (within the grown
+        window plus the creature's length: seeded into the search around it), and whether any
+        lie only farther away (then the whole volume is searched too). Otherwise ([], False)."""
+        T_pred = self.predict(t)
+        if self.status != "lost" or T_pred is None:
+            return [], False
+        p_pred = (T_left_base @ T_pred)[:3, 3]
+        reach = self._grown(t - self.t_last) + max(self.model.size_mm(self.alpha))
+        pairs = blob_pairs(frame.left, frame.right, self.model, self.rig, self.est_params)
+        near = [bp for bp in pairs if np.linalg.norm(bp.position_mm - p_pred) <= reach]
+        return near, len(pairs) > len(near)
+
+    # ------------------------------------------------------------------ tracking search
+
+    def _restart_search(self, frame: StereoHue, T_left_model: np.ndarray, alpha: float) -> None:
+        """The tracking search (re)starts around a pose (left camera of this frame, mm)."""
+        if self.search is None:
+            self.search = PoseSearch(self.model, self.rig, frame, self.ga_params, self.est_params,
+                                     self.fit_params, self.rng)
+        R, t = T_left_model[:3, :3], T_left_model[:3, 3]
+        self._window(R, t, alpha)
+        self.search.seed(R, t, np.array([alpha]))
+
+    def _grown(self, dt: float) -> float:
+        """Position half-width of the window dt (s) after the last measurement (mm): it grows
+        as the prediction's uncertainty does, up to search_window_mm."""
+        p = self.p
+        return min(p.window_position_mm + p.window_growth_mm_s * max(dt, 0.0),
+                   max(p.search_window_mm, p.window_position_mm))
 
     def _window(self, R: np.ndarray, t_left: np.ndarray, alpha: float, dt: float = 0.0) -> None:
-        """Search window around a pose in the left camera frame; the position half-width grows
-        with the time dt (s) since the last measurement, as the prediction's uncertainty does."""
+        """Search window around a pose in the left camera frame. Across the line of sight the
+        position half-width grows with the time dt (s) since the last measurement (`_grown`);
+        along it (depth: the creature floats, it drifts across the view) it stays
+        window_position_mm, which with the scale's window holds alpha near the track's. A lost
+        track's heading window is twice as wide (it may turn while hidden)."""
         p = self.p
-        self.search.set_window(R, t_left, alpha, p.window_position_mm + p.window_growth_mm_s * max(dt, 0.0),
-                               p.window_heading_deg, p.window_tilt_deg, p.window_alpha_frac)
+        args = (p.window_heading_deg * (2.0 if self.status == "lost" else 1.0), p.window_tilt_deg,
+                p.window_alpha_frac)
+        space = self.search.space
+        across = space.window(R, t_left, alpha, self._grown(dt), *args)
+        along = space.window(R, t_left, alpha, p.window_position_mm, *args)
+        lo, hi = across.lo.copy(), across.hi.copy()
+        lo[DEPTH_GENE], hi[DEPTH_GENE] = along.lo[DEPTH_GENE], along.hi[DEPTH_GENE]
+        self.search.ga.set_region(Region.box(lo, hi, across.periodic))
 
     def _rebase(self, T_new_old: np.ndarray) -> None:
         """Re-express the population's poses in the new frame's left camera (they live in the
@@ -300,11 +430,13 @@ class Tracker:
             g[ok] = s.space.encode(R2[ok], t2[ok], alpha[ok])
         s.ga.set_genes(g)
 
-    def _track_step(self, frame: StereoHue, T_base_left: np.ndarray, T_left_base: np.ndarray, t: float,
-                    max_generations: int):
+    def _track_step(self, frame: StereoHue, T_left_base: np.ndarray, T_new_old: np.ndarray | None, t: float,
+                    max_generations: int, near: list[BlobPair]) -> tuple[Candidate | None, int]:
+        """A few generations in the window around the prediction (lost: the track's pose moved
+        onto each blob pair `near` it is seeded too); the best pose and the generations run."""
         s = self.search
-        if self.T_base_left_last is not None:
-            self._rebase(T_left_base @ self.T_base_left_last)
+        if T_new_old is not None:
+            self._rebase(T_new_old)
         s.set_frame(frame)
         plane = self.p.plane_search and s.space.kind == "image"
         if plane:
@@ -316,6 +448,8 @@ class Tracker:
             if T_lm[2, 3] > 1.0:
                 self._window(T_lm[:3, :3], T_lm[:3, 3], float(self.alpha), t - self.t_last)
                 s.seed(T_lm[:3, :3], T_lm[:3, 3], np.array([self.alpha]))
+                for pair in near:
+                    s.seed(T_lm[:3, :3], pair.position_mm, np.array([self.alpha]))
         t_end = time.perf_counter() + self.p.time_budget_ms * 1e-3
         n = 0
         while n < max_generations:
@@ -326,11 +460,18 @@ class Tracker:
         if plane:
             g, f = s.ga.best()
             R, tl, alpha, _ = s.space.decode(on_plane(g[None], K, T_left_base, wz))
-            return (R[0], tl[0], float(alpha[0]), float(f), n) if np.isfinite(f) else None
+            return (Candidate(R[0], tl[0], float(alpha[0]), float(f), n, "plane") if np.isfinite(f) else None), n
         c = s.best()
-        if not np.isfinite(c.fitness):
-            return None
-        return (c.R, c.position_mm, c.alpha, float(c.fitness), n)
+        return (c if np.isfinite(c.fitness) else None), n
+
+
+def _in_camera(m: _Measured, T_left_base: np.ndarray) -> Candidate:
+    """A measurement's pose in this frame's left camera (the whole-volume search measured it on
+    an earlier frame)."""
+    if not m.acquired:
+        return m.c
+    T = T_left_base @ m.T_base_model
+    return Candidate(T[:3, :3], T[:3, 3], m.c.alpha, m.c.fitness, m.c.generations, m.c.source, m.c.aspect)
 
 
 def on_plane(g: np.ndarray, K: np.ndarray, T_left_base: np.ndarray, water_z_mm: float) -> np.ndarray:
