@@ -216,13 +216,9 @@ def acquisition(model: PhotoModel, left_bgr: np.ndarray, right_bgr: np.ndarray, 
     # the look-alike twins (mirror, heading + 180 deg) are tried for the leading island only
     lead = int(np.argmax([c.fitness for c in firsts]))
     search = islands[lead][1]
-    g0 = search.ga.generation
-    firsts[lead] = search.resolve_twins(firsts[lead])
-    yield search.ga.generation - g0
+    firsts[lead] = yield from search.twin_steps(firsts[lead])
     if p.plane_refine and np.isfinite(firsts[lead].fitness):
-        g0 = search.ga.generation
-        firsts[lead] = search.refine_tilt(firsts[lead], left_bgr, right_bgr)
-        yield search.ga.generation - g0
+        firsts[lead] = yield from search.tilt_steps(firsts[lead], left_bgr, right_bgr)
     if p.aspect_max > 1.0 and np.isfinite(firsts[lead].fitness):
         g0 = search.ga.generation
         c = search.refine_aspect(firsts[lead], p.aspect_max)

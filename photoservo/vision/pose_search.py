@@ -333,6 +333,11 @@ class PoseSearch:
                      tilt_deg: float, alpha_frac: float) -> Candidate:
         """A short GA of its own (half the patience) in a narrow window around one pose, seeded
         with it; its work is counted in this search's generations and evaluations."""
+        return drive(self.local_steps(R, t, alpha, position_frac, heading_deg, tilt_deg, alpha_frac))
+
+    def local_steps(self, R: np.ndarray, t: np.ndarray, alpha: float, position_frac: float, heading_deg: float,
+                    tilt_deg: float, alpha_frac: float) -> Generator[int, None, Candidate]:
+        """`local_search` one generation per step (see `steps`)."""
         p = self.est_params
         short = dataclasses.replace(p, min_generations=max(1, p.patience // 2), patience=max(2, p.patience // 2),
                                     max_generations=max(p.patience, p.max_generations // 4))
@@ -340,7 +345,7 @@ class PoseSearch:
         sub.ga.reset(sub.space.window(R, t, alpha, position_mm=position_frac * float(t[2]), heading_deg=heading_deg,
                                       tilt_deg=tilt_deg, alpha_frac=alpha_frac))
         sub.seed(R, t, alpha)
-        c = sub.run(ambiguity_check=False)
+        c = yield from sub.steps()
         self.ga.evaluations += sub.ga.evaluations
         self.ga.generation += c.generations
         return c
@@ -385,11 +390,15 @@ class PoseSearch:
     def resolve_twins(self, best: Candidate) -> Candidate:
         """Try the look-alike twins of a converged pose (`alternatives`), each by a short GA in a
         narrow window around it; the best of the pose and its twins."""
+        return drive(self.twin_steps(best))
+
+    def twin_steps(self, best: Candidate) -> Generator[int, None, Candidate]:
+        """`resolve_twins` one generation per step (see `steps`)."""
         if not np.isfinite(best.fitness):
             return best
         for R_alt in alternatives(best.R, best.position_mm):
-            c = self.local_search(R_alt, best.position_mm, best.alpha, position_frac=0.03, heading_deg=15.0,
-                                  tilt_deg=15.0, alpha_frac=0.08)
+            c = yield from self.local_steps(R_alt, best.position_mm, best.alpha, position_frac=0.03, heading_deg=15.0,
+                                            tilt_deg=15.0, alpha_frac=0.08)
             if c.fitness > best.fitness:
                 best = c
                 self.ga.inject(self.space.encode(c.R, c.position_mm, c.alpha))
@@ -401,6 +410,11 @@ class PoseSearch:
         position, heading and scale by a short GA with the tilt held within 1.5 deg, and keep the
         result when its fitness is at most `plane_fitness_tol` below `best` (the hue fitness
         vetoes a plane fitted to the wrong thing)."""
+        return drive(self.tilt_steps(best, left_bgr, right_bgr))
+
+    def tilt_steps(self, best: Candidate, left_bgr: np.ndarray,
+                   right_bgr: np.ndarray) -> Generator[int, None, Candidate]:
+        """`refine_tilt` one generation per step (see `steps`)."""
         lut = np.zeros(256, bool)
         lut[:HUE_BINS] = np.asarray(self.model.target_hues, bool)
         plane = fit_target_plane(best.R, best.position_mm, best.alpha, self.model, grey(left_bgr),
@@ -408,7 +422,8 @@ class PoseSearch:
         if plane is None:
             return best
         R2, t2 = align_to_plane(best.R, best.position_mm, plane)
-        c = self.local_search(R2, t2, best.alpha, position_frac=0.02, heading_deg=5.0, tilt_deg=1.5, alpha_frac=0.05)
+        c = yield from self.local_steps(R2, t2, best.alpha, position_frac=0.02, heading_deg=5.0, tilt_deg=1.5,
+                                        alpha_frac=0.05)
         if c.fitness >= best.fitness - self.est_params.plane_fitness_tol:
             return Candidate(c.R, c.position_mm, c.alpha, c.fitness, self.ga.generation, best.source)
         return best
