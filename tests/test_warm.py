@@ -42,10 +42,10 @@ def test_after_the_warm_start_session_frames_compile_or_load_nothing():
     before = {k: len(d.signatures) for k, d in kernels.items()}
     tracker = Tracker.from_config(sim.scene.model, sim.rig, cfg, time_budget=False)
     T = pa10.fk(sim.q0) @ sim.rig.T_flange_left()
-    for k in range(3):  # the acquisition, then tracking frames
+    for k in range(12):  # the acquisition (spread over frames), then tracking frames
         left, right = sim.scene.render(T, k / 30, T, k / 30)
         tracker.update(stereo_hue(left, right, cfg.fitness), left, right, T, k / 30)
-    assert tracker.status == "tracking"
+    assert tracker.status == "tracking" and tracker.acquisitions == 1
     assert {k: len(d.signatures) for k, d in kernels.items()} == before
 
 

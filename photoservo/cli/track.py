@@ -112,6 +112,7 @@ class _StatusLine:
         line = (f"t {d.t:5.1f} s | {rate} | {d.status:<9} fit {_num(d.fitness, '.2f')} | "
                 f"pos {pos_s} | alpha {_num(d.alpha, '.2f')} | "
                 f"err {_num(d.error_mm, '.0f', ' mm')} {_num(d.yaw_deg, '.1f', ' deg')} | {phase}"
+                + (f" | truth {_num(d.truth_error_mm, '.0f', ' mm')}" if d.truth_error_mm is not None else "")
                 + (f" | stop: {d.stop}" if d.stop and not self.no_motion else "")
                 + (f" | {d.link.text()}" if d.link else ""))
         self.drawn = True
@@ -229,6 +230,11 @@ def _report(args, sc, rec, cfg, status) -> int:
         if not math.isnan(s["hold_error_rms_mm"]):
             print(f"hold error vs truth (after settling): {s['hold_error_rms_mm']:.1f} mm RMS, "
                   f"{s['hold_yaw_error_rms_deg']:.2f} deg RMS yaw")
+        if "track_error_mm" in s:
+            e = s["track_error_mm"]
+            print(f"track error vs truth (fully in view): median {_num(e['median'], '.1f')}, p95 "
+                  f"{_num(e['p95'], '.1f')} mm; false tracks {s['false_tracks']}; re-acquisitions "
+                  f"[{', '.join(_num(x, '.2f') for x in s['reacquisition_s'])}] s")
         print("median ms: " + ", ".join(f"{k} {v:.1f}" for k, v in t.items()))
         for f in s["faults"]:
             print(f"fault: {f}")

@@ -84,8 +84,8 @@ class Controller:
         stop = ""
         if track is None or track.T_base_model is None:
             stop = "no target"
-        elif now - track.t > p.max_estimate_age_s:
-            stop = f"estimate {1e3 * (now - track.t):.0f} ms old"
+        elif now - track.t + track.coast_s > p.max_estimate_age_s:  # a coasting pose is as old as its measurement
+            stop = f"estimate {1e3 * (now - track.t + track.coast_s):.0f} ms old"
         T_des = None
         if not stop:
             T_target = track.T_base_model.copy()

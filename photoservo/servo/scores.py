@@ -17,6 +17,17 @@ comparison table (record/compare.run_metrics), `tune` and the benchmarks.
                          found frames: shake that a constant-velocity drift does not add.
   commanded motion (rad/s)  total variation of the joint-velocity setpoints,
                          sum_k ||dq*[k] - dq*[k-1]||: how much the servo law changed its command.
+  tracking against the truth (issue 10), per frame (`TruthFrame`): the summary's
+    track_error_mm       {median, p95} of the track error over the frames where the creature is
+                         fully in both views (all of S_in inside both images) and not hidden, and
+                         the tracker gave a pose (tracking or coasting); track_error_partial_mm the
+                         same over the frames where it is in view in part;
+    false_tracks         frames reported tracking or coasting while the creature is out of view
+                         (none of S_in inside an image) or the estimate is > 50 mm from the truth;
+    reacquisition_s      per visibility gap (frames where it is not fully in view, or hidden by
+                         foam, after it was), seconds from its first visible frame after the gap
+                         to the first frame with status tracking (0: the track held through it;
+                         None: not back before the next gap or the run's end).
 
 Truth exists in simulation only (`Truth`).
 """
@@ -25,6 +36,7 @@ from __future__ import annotations
 
 import bisect
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -44,6 +56,8 @@ class Truth:
     motion: Any
     size_mm: tuple[float, float]
     distractor: Any = None
+    in_view: Callable[[np.ndarray, float], float] | None = None  # (T_base_left, t) -> share of S_in in both images
+    hidden: Callable[[float], bool] | None = None  # t -> foam over the creature
 
 
 def rig_centre(T_base_left: np.ndarray, T_left_centre: np.ndarray) -> np.ndarray:
@@ -116,6 +130,84 @@ def commanded_motion(setpoint_dq: np.ndarray) -> float:
     return float(np.linalg.norm(np.diff(dq, axis=0), axis=1).sum()) if len(dq) > 1 else float("nan")
 
 
+FULLY_IN_VIEW = 0.999  # a share of S_in in both images at least this: the creature fully in both views
+FALSE_TRACK_MM = 50.0  # a pose farther than this from the truth is a false track (issue 10)
+POSE_STATUSES = ("tracking", "coasting")  # the statuses that give the arm a pose
+
+
+@dataclass(frozen=True)
+class TruthFrame:
+    """One frame against the simulator's truth: capture time (s), the tracker's status, the
+    share of the creature's inner points S_in inside both images (`Truth.in_view`), foam over
+    it (`Truth.hidden`), and |estimated - true| position (mm; nan without a pose)."""
+
+    t: float
+    status: str
+    in_view: float
+    hidden: bool
+    error_mm: float
+
+    @property
+    def visible(self) -> bool:
+        """Fully in both views and not hidden: the tracker can be asked to see it."""
+        return self.in_view >= FULLY_IN_VIEW and not self.hidden
+
+
+def track_error_summary(frames: list[TruthFrame], partial: bool = False) -> dict:
+    """`track_error_mm` of the summary: {median, p95} of the track error over the frames where
+    the creature is fully in both views (not hidden) and the tracker gave a pose; None without
+    such frames. `partial`: over the frames where it is in view only in part instead
+    (`track_error_partial_mm`: a creature leaving the view of a still arm).
+
+    >>> track_error_summary([TruthFrame(0.0, "tracking", 1.0, False, 2.0), TruthFrame(0.1, "lost", 1.0, False, math.nan)])
+    {'median': 2.0, 'p95': 2.0}
+    """
+    def counted(f: TruthFrame) -> bool:
+        seen = 0.0 < f.in_view < FULLY_IN_VIEW and not f.hidden if partial else f.visible
+        return seen and f.status in POSE_STATUSES and math.isfinite(f.error_mm)
+    e = [f.error_mm for f in frames if counted(f)]
+    if not e:
+        return {"median": None, "p95": None}
+    return {"median": float(np.median(e)), "p95": float(np.percentile(e, 95))}
+
+
+def false_tracks(frames: list[TruthFrame]) -> int:
+    """Frames reported tracking or coasting while the creature is out of view (none of it in
+    both images) or the estimate is more than FALSE_TRACK_MM from the truth."""
+    return sum(1 for f in frames if f.status in POSE_STATUSES
+               and (f.in_view <= 0.0 or not f.error_mm <= FALSE_TRACK_MM))
+
+
+def reacquisition_s(frames: list[TruthFrame]) -> list[float | None]:
+    """Per visibility gap (frames not `visible` after it was visible), the seconds from the
+    first visible frame after the gap to the first frame with status tracking (0 when the track
+    held through the gap); None when the track did not come back before the creature left again
+    or the run ended."""
+    out: list[float | None] = []
+    seen = in_gap = False
+    t_back: float | None = None
+    for f in frames:
+        if t_back is not None:
+            if f.status == "tracking":
+                out.append(f.t - t_back)
+                t_back = None
+            elif not f.visible:
+                out.append(None)
+                t_back, in_gap = None, True
+                continue
+        if not f.visible:
+            in_gap = seen
+        elif in_gap:
+            in_gap, t_back = False, f.t
+            if f.status == "tracking":
+                out.append(0.0)
+                t_back = None
+        seen = seen or f.visible
+    if t_back is not None:
+        out.append(None)
+    return out
+
+
 def rms(values: list[float]) -> float:
     return math.sqrt(float(np.mean(np.square(values)))) if len(values) else float("nan")
 
@@ -137,6 +229,7 @@ class Scores:
     distractor_min_mm: float = float("inf")  # closest the rig centre came to the look-alike (horizontal)
     dropped_frames: int = 0  # frames with no arm state at their capture time
     last_status: str | None = None
+    truth_frames: list[TruthFrame] = field(default_factory=list)  # simulation: each frame against the truth
 
     def time(self, stage: str, ms: float) -> None:
         self.timings_ms.setdefault(stage, []).append(ms)
@@ -150,6 +243,16 @@ class Scores:
             self.lost_events += status == "lost"
             self.last_status = status
         return changed
+
+    def score_track(self, truth: Truth, T_base_left: np.ndarray, t: float, status: str,
+                    p_estimate: np.ndarray | None) -> TruthFrame:
+        """One frame against the truth (`TruthFrame`): captured at scene time t (s) with the left
+        camera at T_base_left, the tracker's status and estimated position (mm, base frame)."""
+        err = math.nan if p_estimate is None else track_error_mm(p_estimate, truth.motion.pose(t)[:3, 3])
+        f = TruthFrame(t, status, 1.0 if truth.in_view is None else truth.in_view(T_base_left, t),
+                       truth.hidden is not None and truth.hidden(t), err)
+        self.truth_frames.append(f)
+        return f
 
     def score_hold(self, t: float, T_base_left: np.ndarray, T_left_centre: np.ndarray, truth: Truth,
                    height_mm: float) -> None:
@@ -184,5 +287,9 @@ class Scores:
             "hold_error_max_mm": max((h.error_mm for h in held), default=0.0),
             "collected": self.collected, "faults": list(self.faults),
             "timings_ms_median": {k: float(np.median(v)) for k, v in self.timings_ms.items()},
-            "distractor_min_mm": self.distractor_min_mm,
+            "distractor_min_mm": self.distractor_min_mm, "final_status": self.last_status,
+            **({"track_error_mm": track_error_summary(self.truth_frames),
+                "track_error_partial_mm": track_error_summary(self.truth_frames, partial=True),
+                "false_tracks": false_tracks(self.truth_frames), "reacquisition_s": reacquisition_s(self.truth_frames)}
+               if self.truth_frames else {}),
         }

@@ -88,13 +88,15 @@ class Status:
     stop: str
     fps: float | None = None  # None on the simulated clock
     link: Any = None          # the link's quality (real time)
+    truth_error_mm: float | None = None  # simulation: the track error against the truth (nan: no pose)
 
     @classmethod
     def of(cls, t: float, sc: Scores, track: Track | None, tick: Tick, fps: float | None = None) -> "Status":
         pos = None if track is None or track.T_base_model is None else track.T_base_model[:3, 3]
         return cls(t, sc.frames, bool(track and track.found), track.status if track else "acquiring",
                    None if track is None else track.fitness, pos, None if track is None else track.alpha,
-                   tick.error_mm, tick.yaw_deg, tick.phase, tick.stop_reason, fps, tick.link)
+                   tick.error_mm, tick.yaw_deg, tick.phase, tick.stop_reason, fps, tick.link,
+                   sc.truth_frames[-1].error_mm if sc.truth_frames else None)
 
 
 StatusFn = Callable[[Status], None]
@@ -122,6 +124,8 @@ def vision_step(fr: Frame, tracker: Tracker, cfg: Config, sc: Scores, recorder, 
         events.append((fr.t_delivery, f"track {track.status}"))
     if truth is not None:
         sc.score_hold(fr.t_left, fr.T_base_left, left_centre(tracker.rig), truth, cfg.servo.hover_mm)
+        sc.score_track(truth, fr.T_base_left, fr.t_left, track.status,
+                       None if track.T_base_model is None else track.T_base_model[:3, 3])
     if recorder is not None:
         _record_frame(recorder, fr, hue, track, tracker, truth, sc, {"hue": 1e3 * (c1 - c0), "ga": 1e3 * (c2 - c1)})
     return track

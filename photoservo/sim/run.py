@@ -35,7 +35,7 @@ from photoservo.servo.session import ControlLoop, Frame, Status, StatusFn, contr
 from photoservo.sim.arm import LockstepArm
 from photoservo.sim.cameras import SimCameras, SimCamerasConfig
 from photoservo.sim.scenes import synthetic_rig
-from photoservo.sim.world import SimScene, sim_hand_eye
+from photoservo.sim.world import SimScene, in_view, occluded, sim_hand_eye
 from photoservo.vision.rig import Rig
 from photoservo.vision.tracker import Track, Tracker
 
@@ -51,7 +51,10 @@ class SimSetup:
 
     @property
     def truth(self) -> Truth:
-        return Truth(self.scene.motion, self.scene.size_mm(), self.scene.distractor_motion)
+        sc = self.scene
+        return Truth(sc.motion, sc.size_mm(), sc.distractor_motion,
+                     in_view=functools.partial(in_view, sc.motion, sc.model, sc.rig, sc.p.alpha_px_per_mm),
+                     hidden=functools.partial(occluded, sc.p.occlusion_s))
 
 
 def sim_config(cfg: Config) -> Config:

@@ -17,7 +17,7 @@ import numpy as np
 from photoservo.errors import InputError
 from photoservo.fileio import read_image
 from photoservo.geometry import axis_rotation
-from photoservo.vision.photo_model import PhotoModelParams, build_photo_model
+from photoservo.vision.photo_model import PhotoModel, PhotoModelParams, build_photo_model
 from photoservo.vision.measurement import visible_shares
 from photoservo.vision.rig import Rig
 from photoservo.sim.specimens import specimen
@@ -122,6 +122,23 @@ class TargetMotion:
         return self.v + np.array([0.0, 0.0, self.heave * w_h * math.cos(w_h * t)])
 
 
+def occluded(occlusion_s: tuple[float, ...], t: float) -> bool:
+    """Foam over the creature at time t (s): t in `[sim] occlusion_s` = [t0, t1)."""
+    return len(occlusion_s) == 2 and occlusion_s[0] <= t < occlusion_s[1]
+
+
+def in_view(motion: TargetMotion, model: PhotoModel, rig: Rig, alpha: float, T_base_left: np.ndarray,
+            t: float) -> float:
+    """Truth (issue 10 scores): the share of the creature's inner points S_in inside BOTH images
+    at time t (s) with the left camera at T_base_left (4x4, base frame, mm): the smaller of the
+    two cameras' shares (vision/measurement.py `visible_shares`) at the true pose and size
+    (alpha px/mm); 1.0 = fully in both views. Foam does not change it (`occluded`)."""
+    T = np.linalg.inv(T_base_left) @ motion.pose(t)
+    if T[2, 3] <= 1.0:
+        return 0.0
+    return min(visible_shares(T[:3, :3], T[:3, 3], alpha, model, rig))
+
+
 # ----------------------------------------------------------------------------- the scene
 
 
@@ -163,8 +180,7 @@ class SimScene:
 
     def occluded(self, t: float) -> bool:
         """Foam covers the creature at time t (s): `[sim] occlusion_s`."""
-        occ = self.p.occlusion_s
-        return len(occ) == 2 and occ[0] <= t < occ[1]
+        return occluded(self.p.occlusion_s, t)
 
     def scene(self, t: float) -> Scene:
         T_world_model = self.T_world_base @ self.motion.pose(t)
@@ -181,14 +197,8 @@ class SimScene:
         return Scene(water=self.water, target=target, distractors=distractors, foam=foam)
 
     def in_view(self, T_base_left: np.ndarray, t: float) -> float:
-        """Truth (issue 10 scores): the share of the creature's inner points S_in inside BOTH
-        images at time t (s) with the left camera at T_base_left (4x4, base frame, mm): the
-        smaller of the two cameras' shares (vision/measurement.py `visible_shares`); 1.0 = fully
-        in both views. Foam does not change it (`occluded` says when foam hides it)."""
-        T = np.linalg.inv(T_base_left) @ self.motion.pose(t)
-        if T[2, 3] <= 1.0:
-            return 0.0
-        return min(visible_shares(T[:3, :3], T[:3, 3], self.p.alpha_px_per_mm, self.model, self.rig))
+        """Truth: the creature's share in both views at time t (s), `in_view`."""
+        return in_view(self.motion, self.model, self.rig, self.p.alpha_px_per_mm, T_base_left, t)
 
     def render(self, T_base_left: np.ndarray, t_left: float, T_base_left_at_right: np.ndarray,
                t_right: float) -> tuple[np.ndarray, np.ndarray]:

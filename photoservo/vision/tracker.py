@@ -1,12 +1,10 @@
 """Real-time multi-step GA tracking (method step 5, issues 5 and 10), eye-in-hand.
 
-The cameras ride on the arm, so each frame comes with T_base_left — where the left camera was
-(in the arm's base frame, mm) when the frame was taken. The tracker keeps its population and its
-constant-velocity motion model in the BASE frame: before a frame is searched, the population's
-poses are re-expressed in that frame's camera (`_rebase`), the model's prediction at the capture
-time gives a search window, and a few GA generations run within a time budget. The best pose goes
-back to the base frame and updates an alpha-beta filter (position, velocity) and a smoothed
-alpha (the creature's size does not change).
+Each frame comes with T_base_left, where the left camera (on the arm) was in the base frame (mm)
+when it was taken. Population and constant-velocity model live in the BASE frame: the poses are
+re-expressed in each frame's camera (`_rebase`), the prediction at the capture time gives a search
+window, a few GA generations run within a time budget, and the best pose updates an alpha-beta
+filter (position, velocity) and a smoothed alpha (the creature's size does not change).
 
 A frame's best pose is a measurement when its fitness reaches the detection threshold (the
 fitness level that passed the estimator's image-relative detection at the last acquisition,
@@ -49,18 +47,17 @@ import numpy as np
 
 from photoservo.errors import InputError
 from photoservo.geometry import invert_pose, make_pose
-from photoservo.vision.detection import Detection
 from photoservo.vision.estimator import Acquired, EstimatorParams, acquisition
 from photoservo.vision.fitness import FitnessParams, StereoHue
-from photoservo.vision.ga import GAParams, Region
+from photoservo.vision.ga import GAParams
 from photoservo.vision.measurement import visible_shares, water_gate
 from photoservo.vision.photo_model import PhotoModel
 from photoservo.vision.pose_search import Candidate, PoseSearch
 from photoservo.vision.rig import Rig
-from photoservo.vision.seeding import BlobPair, blob_pairs
+from photoservo.vision.reacquisition import choose, near_pairs, window_region
+from photoservo.vision.seeding import BlobPair
 
 Status = Literal["acquiring", "tracking", "coasting", "lost", "out_of_view"]
-DEPTH_GENE = 2  # the depth gene along the left camera's axis (inverse depth q, or z) in both codings
 HEAVE_HORIZON_S = 0.25  # known water: the vertical velocity (heave) is extrapolated this long at most (s)
 
 
@@ -123,7 +120,7 @@ class Track:
     generations: int  # GA generations of the tracking search this frame
     seconds: float
     acquire_generations: int = 0  # GA generations of the whole-volume search this frame
-    t_measured: float | None = None  # capture time of the last measurement (s)
+    coast_s: float = 0.0  # how much older than the frame the measurement behind its pose is (s)
 
 
 class TrackerConfig(Protocol):
@@ -148,8 +145,7 @@ class _Acquiring:
 
 @dataclass(frozen=True)
 class _Measured:
-    """A frame's measurement: the pose in the left camera of the frame it was measured on, that
-    pose in the base frame, and the frame's capture time (s)."""
+    """A measurement: pose in the left camera of its frame and in the base frame, capture time (s)."""
 
     c: Candidate
     T_base_model: np.ndarray
@@ -210,8 +206,7 @@ class Tracker:
         return T
 
     def _in_view(self, T_left_model: np.ndarray) -> bool:
-        """At least min_visible of the model inside both images at a pose in the left camera
-        (the track's alpha)."""
+        """At least min_visible of the model in both images at a left-camera pose, track's alpha."""
         return T_left_model[2, 3] > 1.0 and min(visible_shares(
             T_left_model[:3, :3], T_left_model[:3, 3], self.alpha, self.model, self.rig)) >= self.p.min_visible
 
@@ -224,28 +219,28 @@ class Tracker:
         of [tracker] generations_per_frame (replay of a real-time run: its recorded counts)."""
         t0 = time.perf_counter()
         self.frames += 1
-        T_base_left = np.asarray(T_base_left, dtype=float)
-        T_left_base = invert_pose(T_base_left)
+        T_left_base = invert_pose(T_base_left := np.asarray(T_base_left, dtype=float))
         T_new_old = None if self.T_base_left_last is None else T_left_base @ self.T_base_left_last
         self.T_base_left_last = T_base_left
-        m, best, n, far = None, None, 0, False
+        gens = self.p.generations_per_frame if max_generations is None else max_generations
+        m = acq = best = None
+        n = n_acq = 0
+        far = False
         if self.search is not None:
             near, far = self._pairs(frame, T_left_base, t)
-            best, n = self._track_step(frame, T_left_base, T_new_old, t,
-                                       self.p.generations_per_frame if max_generations is None else max_generations,
-                                       near)
-            if best is not None and self._measurement(best, T_base_left, t):
-                m = _Measured(best, T_base_left @ make_pose(best.R, best.position_mm), t)
-        n_acq = 0
+            m, best, n = self._measure_step(frame, T_base_left, T_left_base, T_new_old, t, gens, near)
         if m is None and (self.search is None or far or self.acquiring is not None):
-            m, n_acq = self._acquire_step(frame, left_bgr, right_bgr, T_base_left, t)
-            if m is not None:
-                self._restart_search(frame, T_left_base @ m.T_base_model, m.c.alpha)
+            acq, n_acq = self._acquire_step(frame, left_bgr, right_bgr, T_base_left, t)
+            if acq is not None:  # found on the frame it started on: taken, then tracked on to this one
+                self._accept(acq)
+                self._restart_search(frame, T_left_base @ acq.T_base_model, acq.c.alpha)
+                m, best, n = self._measure_step(frame, T_base_left, T_left_base, None, t, gens, [])
         if m is not None:
             self.acquiring = None
             self._accept(m)
-        else:
+        elif acq is None:
             self._miss(t, T_left_base)
+        m = m or acq
         c = None if m is None else _in_camera(m, T_left_base)
         fitness = float(m.c.fitness if m is not None else best.fitness if best is not None else -math.inf)
         return Track(
@@ -255,8 +250,18 @@ class Tracker:
             alpha=self.alpha, size_mm=None if self.alpha is None else self.model.size_mm(self.alpha),
             R_left=None if c is None else c.R, t_left=None if c is None else c.position_mm,
             alpha_measured=None if c is None else c.alpha, generations=n, seconds=time.perf_counter() - t0,
-            acquire_generations=n_acq, t_measured=self.t_last,
+            acquire_generations=n_acq, coast_s=0.0 if self.t_last is None else max(0.0, t - self.t_last),
         )
+
+    def _measure_step(self, frame: StereoHue, T_base_left: np.ndarray, T_left_base: np.ndarray,
+                      T_new_old: np.ndarray | None, t: float, gens: int,
+                      near: list[BlobPair]) -> tuple[_Measured | None, Candidate | None, int]:
+        """The tracking search on this frame (`_track_step`) and its best pose tested: (the
+        measurement or None, the best pose, the generations run)."""
+        best, n = self._track_step(frame, T_left_base, T_new_old, t, gens, near)
+        if best is None or not self._measurement(best, T_base_left, t):
+            return None, best, n
+        return _Measured(best, T_base_left @ make_pose(best.R, best.position_mm), t), best, n
 
     def _measurement(self, c: Candidate, T_base_left: np.ndarray, t: float, jump: bool = True) -> bool:
         """Is a frame's best pose (left camera of the frame at T_base_left, time t) a
@@ -292,7 +297,7 @@ class Tracker:
         self.misses = 0
         self.status = "tracking"
 
-    def _miss(self, t: float, T_left_base: np.ndarray) -> None:
+    def _miss(self, t: float, T_left_base: np.ndarray) -> None:  # status of a frame without measurement
         self.misses += 1
         T_pred = self.predict(t)
         if T_pred is None:
@@ -346,7 +351,9 @@ class Tracker:
         except StopIteration as end:
             self.acquiring = None
             self.acquisitions += bool(end.value.islands)  # a search ran (a frame without blob pairs has none)
-            chosen = self._choose(end.value.results, a.T_base_left, a.t)
+            T_pred = self.predict(a.t)
+            chosen = choose(end.value.results, a.T_base_left, self.alpha, None if T_pred is None else T_pred[:3, 3],
+                            self.p.size_tolerance)
             if chosen is not None:
                 d, c = chosen
                 self.threshold = d.threshold
@@ -354,34 +361,15 @@ class Tracker:
                     return _Measured(c, a.T_base_left @ make_pose(c.R, c.position_mm), a.t, acquired=True), n
         return None, n
 
-    def _choose(self, results: list[tuple[Detection, Candidate]], T_base_left: np.ndarray,
-                t: float) -> tuple[Detection, Candidate] | None:
-        """Among the candidates that passed detection (left camera at T_base_left, time t): with
-        a track before, only those of its size (alpha within size_tolerance), the nearest to its
-        prediction; without one, the best."""
-        passed = [(d, c) for d, c in results if d.passed]
-        T_pred = self.predict(t)
-        if self.alpha is None or T_pred is None or not passed:
-            return passed[0] if passed else None
-        same = [(d, c) for d, c in passed if abs(c.alpha / self.alpha - 1.0) <= self.p.size_tolerance]
-
-        def dist(dc: tuple[Detection, Candidate]) -> float:
-            p = T_base_left[:3, :3] @ dc[1].position_mm + T_base_left[:3, 3]
-            return float(np.linalg.norm(p - T_pred[:3, 3]))
-        return min(same, key=dist) if same else None
-
     def _pairs(self, frame: StereoHue, T_left_base: np.ndarray, t: float) -> tuple[list[BlobPair], bool]:
-        """Lost: the frame's target-hue blob pairs near the predicted track (within the grown
-        window plus the creature's length: seeded into the search around it), and whether any
-        lie only farther away (then the whole volume is searched too). Otherwise ([], False)."""
+        """Lost: the blob pairs near the predicted track (within the grown window plus the
+        creature's length: seeded into the search around it), and whether any lie only farther
+        away (then the whole volume is searched too). Otherwise ([], False)."""
         T_pred = self.predict(t)
         if self.status != "lost" or T_pred is None:
             return [], False
-        p_pred = (T_left_base @ T_pred)[:3, 3]
         reach = self._grown(t - self.t_last) + max(self.model.size_mm(self.alpha))
-        pairs = blob_pairs(frame.left, frame.right, self.model, self.rig, self.est_params)
-        near = [bp for bp in pairs if np.linalg.norm(bp.position_mm - p_pred) <= reach]
-        return near, len(pairs) > len(near)
+        return near_pairs(frame, self.model, self.rig, self.est_params, (T_left_base @ T_pred)[:3, 3], reach)
 
     # ------------------------------------------------------------------ tracking search
 
@@ -408,14 +396,9 @@ class Tracker:
         window_position_mm, which with the scale's window holds alpha near the track's. A lost
         track's heading window is twice as wide (it may turn while hidden)."""
         p = self.p
-        args = (p.window_heading_deg * (2.0 if self.status == "lost" else 1.0), p.window_tilt_deg,
-                p.window_alpha_frac)
-        space = self.search.space
-        across = space.window(R, t_left, alpha, self._grown(dt), *args)
-        along = space.window(R, t_left, alpha, p.window_position_mm, *args)
-        lo, hi = across.lo.copy(), across.hi.copy()
-        lo[DEPTH_GENE], hi[DEPTH_GENE] = along.lo[DEPTH_GENE], along.hi[DEPTH_GENE]
-        self.search.ga.set_region(Region.box(lo, hi, across.periodic))
+        self.search.ga.set_region(window_region(
+            self.search.space, R, t_left, alpha, self._grown(dt), p.window_position_mm,
+            p.window_heading_deg * (2.0 if self.status == "lost" else 1.0), p.window_tilt_deg, p.window_alpha_frac))
 
     def _rebase(self, T_new_old: np.ndarray) -> None:
         """Re-express the population's poses in the new frame's left camera (they live in the

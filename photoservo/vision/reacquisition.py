@@ -1,0 +1,58 @@
+"""The tracker's re-acquisition (issue 10, vision/tracker.py), its pure parts: which candidate
+of a whole-volume search continues a track, which target-hue blob pairs lie near a lost track,
+and the search window that grows across the view while the depth stays held.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from photoservo.vision.detection import Detection
+from photoservo.vision.estimator import EstimatorParams
+from photoservo.vision.fitness import StereoHue
+from photoservo.vision.ga import Region
+from photoservo.vision.photo_model import PhotoModel
+from photoservo.vision.pose_search import Candidate, GeneSpace
+from photoservo.vision.rig import Rig
+from photoservo.vision.seeding import BlobPair, blob_pairs
+
+DEPTH_GENE = 2  # the depth gene along the left camera's axis (inverse depth q, or z) in both codings
+
+
+def choose(results: list[tuple[Detection, Candidate]], T_base_left: np.ndarray, alpha: float | None,
+           p_pred: np.ndarray | None, size_tolerance: float) -> tuple[Detection, Candidate] | None:
+    """The candidate of a whole-volume search (`estimator.acquisition`'s ranked results, poses in
+    the left camera at T_base_left, base frame mm) that continues a track: among those that
+    passed detection, with a track before (its alpha px/mm and predicted position p_pred, base
+    frame mm) only those of its size (alpha within size_tolerance), the nearest to p_pred;
+    without one, the best. None when none qualifies."""
+    passed = [(d, c) for d, c in results if d.passed]
+    if alpha is None or p_pred is None or not passed:
+        return passed[0] if passed else None
+    same = [(d, c) for d, c in passed if abs(c.alpha / alpha - 1.0) <= size_tolerance]
+
+    def dist(dc: tuple[Detection, Candidate]) -> float:
+        return float(np.linalg.norm(T_base_left[:3, :3] @ dc[1].position_mm + T_base_left[:3, 3] - p_pred))
+    return min(same, key=dist) if same else None
+
+
+def near_pairs(frame: StereoHue, model: PhotoModel, rig: Rig, p: EstimatorParams, p_pred: np.ndarray,
+               reach_mm: float) -> tuple[list[BlobPair], bool]:
+    """The frame's target-hue blob pairs (`seeding.blob_pairs`) whose triangulated position lies
+    within reach_mm of the predicted position p_pred (left camera frame, mm), and whether any
+    lie farther away."""
+    pairs = blob_pairs(frame.left, frame.right, model, rig, p)
+    near = [bp for bp in pairs if np.linalg.norm(bp.position_mm - p_pred) <= reach_mm]
+    return near, len(pairs) > len(near)
+
+
+def window_region(space: GeneSpace, R: np.ndarray, t: np.ndarray, alpha: float, across_mm: float, along_mm: float,
+                  heading_deg: float, tilt_deg: float, alpha_frac: float) -> Region:
+    """`GeneSpace.window` around a pose (left camera frame, mm) with the position +- across_mm
+    across the line of sight and +- along_mm along it (depth): a floating creature drifts across
+    the view, and a held depth with the scale's window holds alpha near the track's."""
+    across = space.window(R, t, alpha, across_mm, heading_deg, tilt_deg, alpha_frac)
+    along = space.window(R, t, alpha, along_mm, heading_deg, tilt_deg, alpha_frac)
+    lo, hi = across.lo.copy(), across.hi.copy()
+    lo[DEPTH_GENE], hi[DEPTH_GENE] = along.lo[DEPTH_GENE], along.hi[DEPTH_GENE]
+    return Region.box(lo, hi, across.periodic)

@@ -1,0 +1,87 @@
+"""Tracking scores against the simulator's truth (servo/scores.py, issue 10) on hand-made frames,
+and on the simulator's clock: foam over the creature for a second, and the creature drifting out
+of view of a still arm (sim/run.py run_lockstep)."""
+
+import math
+
+import pytest
+
+from photoservo.config import load_config
+from photoservo.servo.scores import TruthFrame, false_tracks, reacquisition_s, track_error_summary
+from photoservo.sim.run import run_lockstep
+
+NAN = math.nan
+
+
+def _frames(rows):
+    return [TruthFrame(t, status, in_view, hidden, err) for t, status, in_view, hidden, err in rows]
+
+
+def test_track_error_counts_only_frames_fully_in_view_with_a_pose():
+    fr = _frames([
+        (0.0, "acquiring", 1.0, False, NAN),  # no pose
+        (0.1, "tracking", 1.0, False, 2.0),
+        (0.2, "tracking", 1.0, False, 4.0),
+        (0.3, "coasting", 1.0, False, 6.0),
+        (0.4, "tracking", 0.7, False, 90.0),  # partly out of view: not counted
+        (0.5, "coasting", 1.0, True, 80.0),  # hidden by foam: not counted
+    ])
+    e = track_error_summary(fr)
+    assert e["median"] == 4.0 and 5.0 < e["p95"] <= 6.0
+    assert track_error_summary(fr[:1]) == {"median": None, "p95": None}
+    assert track_error_summary(fr, partial=True) == {"median": 90.0, "p95": 90.0}
+
+
+def test_false_tracks_are_poses_out_of_view_or_far_from_the_truth():
+    fr = _frames([
+        (0.0, "tracking", 1.0, False, 10.0),
+        (0.1, "tracking", 0.5, False, 49.0),  # partly in view, near the truth: fine
+        (0.2, "coasting", 0.2, False, 51.0),  # too far
+        (0.3, "coasting", 0.0, False, 5.0),  # out of view, yet a pose
+        (0.4, "out_of_view", 0.0, False, NAN),
+        (0.5, "lost", 1.0, True, NAN),
+    ])
+    assert false_tracks(fr) == 2
+
+
+def test_reacquisition_per_gap_from_fully_in_view_again_to_tracking():
+    fr = _frames([
+        (0.0, "acquiring", 0.9, False, NAN),  # not yet fully seen: the start is no gap
+        (0.1, "tracking", 1.0, False, 1.0),
+        (0.2, "coasting", 1.0, True, NAN),  # gap 1: hidden
+        (0.3, "lost", 1.0, True, NAN),
+        (0.4, "lost", 1.0, False, NAN),  # visible again at 0.4
+        (0.5, "lost", 1.0, False, NAN),
+        (0.6, "tracking", 1.0, False, 2.0),  # -> 0.2 s
+        (0.7, "tracking", 0.8, False, 3.0),  # gap 2: partly out, still tracked
+        (0.8, "tracking", 1.0, False, 3.0),  # -> 0.0 s
+        (0.9, "out_of_view", 0.0, False, NAN),  # gap 3: back at 1.0, never tracked again
+        (1.0, "lost", 1.0, False, NAN),
+    ])
+    r = reacquisition_s(fr)
+    assert len(r) == 3 and r[0] == pytest.approx(0.2) and r[1] == 0.0 and r[2] is None
+
+
+def test_foam_over_the_creature_is_waited_out_and_the_track_is_back_within_a_second():
+    """`[sim] occlusion_s`: hidden frames are never tracking and give the arm no stale pose;
+    once the foam goes, tracking again within 1 s; no false track."""
+    cfg = load_config(overrides=["sim.occlusion_s=[1.5, 2.5]", "sim.camera_fps=15"])
+    sc = run_lockstep(cfg, 3.5, seed=0, settle_s=1.0)
+    s = sc.summary()
+    hidden = [f for f in sc.truth_frames if f.hidden]
+    assert hidden and all(f.status in ("coasting", "lost") for f in hidden), s
+    assert len(s["reacquisition_s"]) == 1 and s["reacquisition_s"][0] <= 1.0, s
+    assert s["false_tracks"] == 0 and s["track_error_mm"]["p95"] <= 15.0, s
+    back = [f for f in sc.truth_frames if f.t >= 2.5 + s["reacquisition_s"][0]]
+    assert back and all(f.status == "tracking" for f in back), s
+
+
+def test_creature_drifting_out_of_a_still_arms_view_is_reported_so():
+    """`track --sim --no-motion`: the default scene drifts the creature out of the right image;
+    status out_of_view at the end, no false track, accurate while fully in view."""
+    cfg = load_config()
+    sc = run_lockstep(cfg, 4.0, no_motion=True, seed=0)
+    s = sc.summary()
+    assert s["final_status"] == "out_of_view" and s["false_tracks"] == 0, s
+    assert s["track_error_partial_mm"]["p95"] <= 15.0, s  # it is never fully in view of the start pose
+    assert sc.truth_frames[-1].in_view < 0.6
