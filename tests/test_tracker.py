@@ -1,5 +1,6 @@
 """The real-time multi-step GA tracker (vision/tracker.py)."""
 
+import dataclasses
 import math
 
 import numpy as np
@@ -79,6 +80,17 @@ def test_acquisition_is_spread_over_frames_then_tracks(sim):
     assert all(tk.status == "tracking" and tk.acquire_generations == 0 for tk in tracks[first + 1:])
     assert tr.acquisitions == 1 and _err(tracks[-1], s, tracks[-1].t) < 15.0
     assert tracks[-1].alpha == pytest.approx(cfg.sim.alpha_px_per_mm, rel=0.05)
+
+
+def test_acquisition_in_one_frame_tracks_from_it_with_a_sane_velocity(sim):
+    """acquire_generations large enough for the whole search: tracking on the first frame, and
+    the tracking search's second measurement of that instant leaves the velocity alone."""
+    cfg, s = sim
+    one = dataclasses.replace(cfg, tracker=dataclasses.replace(cfg.tracker, acquire_generations=100000))
+    tr = _tracker(one, s)
+    tracks = _run(tr, one, s, 0.0, 4)
+    assert [tk.status for tk in tracks] == ["tracking"] * 4
+    assert all(np.linalg.norm(tk.velocity_mm_s) < 50.0 and _err(tk, s, tk.t) < 15.0 for tk in tracks)
 
 
 def test_spread_acquisition_finds_what_estimate_finds(sim):

@@ -234,7 +234,8 @@ class Tracker:
             if acq is not None:  # found on the frame it started on: taken, then tracked on to this one
                 self._accept(acq)
                 self._restart_search(frame, T_left_base @ acq.T_base_model, acq.c.alpha)
-                m, best, n = self._measure_step(frame, T_base_left, T_left_base, None, t, gens, [])
+                if acq.t < t:
+                    m, best, n = self._measure_step(frame, T_base_left, T_left_base, None, t, gens, [])
         if m is not None:
             self.acquiring = None
             self._accept(m)
@@ -321,11 +322,12 @@ class Tracker:
             self.p_base = p_m.copy()
             self.alpha = float(self.alpha + self.p.gain_alpha * (alpha_m - self.alpha))
         else:
-            dt = max(t - self.t_last, 1e-6)
+            dt = t - self.t_last
             pred = self.p_base + self.v_base * dt
             r = p_m - pred
             self.p_base = pred + self.p.gain_position * r
-            self.v_base = self.v_base + (self.p.gain_velocity / dt) * r
+            if dt > 1e-3:  # a second measurement of one instant says nothing of the velocity
+                self.v_base = self.v_base + (self.p.gain_velocity / dt) * r
             self.alpha = float(self.alpha + self.p.gain_alpha * (alpha_m - self.alpha))
         self.R_base = T_bm[:3, :3].copy()
         self.t_last = t
