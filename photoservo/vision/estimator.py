@@ -190,8 +190,8 @@ def _islands(model: PhotoModel, rig: Rig, frame: StereoHue, ga_params: GAParams,
 
 @dataclass(frozen=True)
 class Acquired:
-    """What an acquisition ends with: every island's best with its detection test, passing
-    first, then by contrast and fitness; the islands (their generations and evaluations)."""
+    """What an acquisition ends with: every island's best with its detection test, ranked by
+    standing (vision/detection.py), then fitness; the islands (their generations, evaluations)."""
 
     results: list[tuple[Detection, Candidate]]
     islands: list[tuple[str, PoseSearch]]
