@@ -120,7 +120,7 @@ def test_real_time_recording_replays_with_its_recorded_generation_counts(recorde
     setup = load_replay(rt)
     assert setup.recorded_generations and "recorded generation counts" in setup.generations_note
     res = replay(setup, tmp_path / "a.rrd")
-    assert res.frames[0].generations == 8   # the acquisition, then the tracking search from it (recorded: 8)
+    assert res.frames[0].generations == 0   # the acquisition (whole here): the tracking search starts next frame
     assert [f.generations for f in res.frames[1:]] == [3] * 5
     # a real-time run's track reached the control law after the frame's hue + GA time (50 ms)
     t_first = read_recording(rt).frames[0].capture_times[0]
