@@ -198,3 +198,22 @@ def test_creature_drifting_out_of_a_still_arms_view_is_out_of_view_never_a_pose(
     sc = build_sim(cfg).scene
     err = [float(np.linalg.norm(p - sc.motion.pose(t)[:3, 3])) for t, _, p in seen if p is not None]
     assert len(err) > 40 and max(err) <= 50.0 and np.median(err) <= 15.0, err
+
+
+def test_choose_takes_estimates_answer_without_a_track_and_the_tracks_size_nearest_with_one():
+    """vision/reacquisition.choose on hand-made candidates (left camera = base frame)."""
+    from photoservo.vision.detection import Detection
+    from photoservo.vision.pose_search import Candidate
+    from photoservo.vision.reacquisition import choose
+
+    def cand(x, alpha, passed, standing):
+        d = Detection(score=0.9, null_level=0.2, contrast=standing, outer_on_target=0.0, passed=passed,
+                      confidence=0.9, threshold=0.5, standing=standing)
+        return d, Candidate(np.eye(3), np.array([x, 0.0, 600.0]), alpha, 0.9, 10, "blob")
+
+    ranked = [cand(0.0, 2.0, False, 0.9), cand(300.0, 2.0, True, 0.6), cand(100.0, 3.0, True, 0.5)]
+    assert choose(ranked, np.eye(4), None, None, 0.15) is None  # estimate's best did not pass: not found
+    assert choose(ranked[1:], np.eye(4), None, None, 0.15)[1].position_mm[0] == 300.0
+    # a track of alpha 2.0 predicted at x = 120: the size rules out the nearer alpha-3 candidate
+    assert choose(ranked, np.eye(4), 2.0, np.array([120.0, 0.0, 600.0]), 0.15)[1].position_mm[0] == 300.0
+    assert choose(ranked, np.eye(4), 2.9, np.array([120.0, 0.0, 600.0]), 0.15)[1].position_mm[0] == 100.0

@@ -22,13 +22,14 @@ DEPTH_GENE = 2  # the depth gene along the left camera's axis (inverse depth q, 
 def choose(results: list[tuple[Detection, Candidate]], T_base_left: np.ndarray, alpha: float | None,
            p_pred: np.ndarray | None, size_tolerance: float) -> tuple[Detection, Candidate] | None:
     """The candidate of a whole-volume search (`estimator.acquisition`'s ranked results, poses in
-    the left camera at T_base_left, base frame mm) that continues a track: among those that
-    passed detection, with a track before (its alpha px/mm and predicted position p_pred, base
-    frame mm) only those of its size (alpha within size_tolerance), the nearest to p_pred;
-    without one, the best. None when none qualifies."""
+    the left camera at T_base_left, base frame mm) that continues a track: with a track before
+    (its alpha px/mm and predicted position p_pred, base frame mm), among the candidates that
+    passed detection those of its size (alpha within size_tolerance), the nearest to p_pred;
+    without one, `estimate`'s answer: the best-standing candidate if it passed. None when none
+    qualifies."""
+    if alpha is None or p_pred is None:
+        return results[0] if results and results[0][0].passed else None
     passed = [(d, c) for d, c in results if d.passed]
-    if alpha is None or p_pred is None or not passed:
-        return passed[0] if passed else None
     same = [(d, c) for d, c in passed if abs(c.alpha / alpha - 1.0) <= size_tolerance]
 
     def dist(dc: tuple[Detection, Candidate]) -> float:
