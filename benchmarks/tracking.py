@@ -113,6 +113,8 @@ def main() -> None:
     args = ap.parse_args()
     cases = args.cases.split(",")
     runs = [run_case(c, args.duration) for _ in range(args.repeats) for c in cases]
+    OUT.parent.mkdir(parents=True, exist_ok=True)
+    write_text_atomic(OUT, json.dumps({"duration_s": args.duration, "repeats": args.repeats, "runs": runs}, indent=1) + "\n")
     print(f"{'case':<10} {'found %':>7} {'hold mm':>8} {'fps':>5} {'trk med':>8} {'trk p95':>8} {'false':>5} "
           f"{'reacq s':>12} {'load':>9} {'CPU s':>6}  targets")
     table = {}
@@ -129,7 +131,7 @@ def main() -> None:
         reacq = "-" if not med["reacquisition_s"] else ",".join(fmt(x, ".2f") for x in med["reacquisition_s"])
         print(f"{c:<10} {med['found_pct']:>7.0f} {fmt(med['hold_rms_mm'], '8.1f')} {med['fps']:>5.1f} "
               f"{fmt(med['track_err_median_mm'], '8.1f')} {fmt(med['track_err_p95_mm'], '8.1f')} "
-              f"{fmt(med['false_tracks'], '5d')} {reacq:>12} {load:>9} {float(np.median([r['cpu_s'] for r in rs])):>6.1f}"
+              f"{fmt(med['false_tracks'], '5.0f')} {reacq:>12} {load:>9} {float(np.median([r['cpu_s'] for r in rs])):>6.1f}"
               f"  {'; '.join(table[c]['verdicts'])}")
     OUT.parent.mkdir(parents=True, exist_ok=True)
     write_text_atomic(OUT, json.dumps({"duration_s": args.duration, "repeats": args.repeats, "table": table,

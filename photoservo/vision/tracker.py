@@ -19,7 +19,8 @@ the model is in each image, it lies on known water (`water_gate`) and it is no j
                known, so alpha stays within `window_alpha_frac`; the position window grows with
                the time since the last measurement up to `search_window_mm`, the heading window
                doubles; target-hue blob pairs near the prediction are seeded with the track's
-               orientation and size. Blob pairs only farther away start the whole-volume search;
+               orientation and size. Blob pairs only farther away, or LOCAL_SEARCH_S without
+               a measurement, start the whole-volume search;
   out_of_view  the predicted creature is less than `min_visible` in either image: it left the
                view; no pose. The whole volume is searched;
   acquiring    no track yet: the whole volume is searched.
@@ -58,6 +59,7 @@ from photoservo.vision.reacquisition import choose, near_pairs, window_region
 from photoservo.vision.seeding import BlobPair
 
 Status = Literal["acquiring", "tracking", "coasting", "lost", "out_of_view"]
+LOCAL_SEARCH_S = 1.0  # lost this long after the last measurement: the whole volume is searched too
 HEAVE_HORIZON_S = 0.25  # known water: the vertical velocity (heave) is extrapolated this long at most (s)
 
 
@@ -229,7 +231,8 @@ class Tracker:
         if self.search is not None:
             near, far = self._pairs(frame, T_left_base, t)
             m, best, n = self._measure_step(frame, T_base_left, T_left_base, T_new_old, t, gens, near)
-        if m is None and (self.search is None or far or self.acquiring is not None):
+        if m is None and (self.search is None or far or self.acquiring is not None
+                          or (self.status == "lost" and t - self.t_last > LOCAL_SEARCH_S)):
             acq, n_acq = self._acquire_step(frame, left_bgr, right_bgr, T_base_left, t)
             if acq is not None:  # found on the frame it started on: taken, then tracked on to this one
                 self._accept(acq)
