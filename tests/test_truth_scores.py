@@ -65,8 +65,8 @@ def test_reacquisition_per_gap_from_fully_in_view_again_to_tracking():
 def test_foam_over_the_creature_is_waited_out_and_the_track_is_back_within_a_second():
     """`[sim] occlusion_s`: hidden frames are never tracking and give the arm no stale pose;
     once the foam goes, tracking again within 1 s; no false track."""
-    cfg = load_config(overrides=["sim.occlusion_s=[1.5, 2.5]", "sim.camera_fps=15"])
-    sc = run_lockstep(cfg, 3.5, seed=0, settle_s=1.0)
+    cfg = load_config(overrides=["sim.occlusion_s=[1.5, 2.5]", "sim.camera_fps=15", "servo.settle_s=1.0"])
+    sc = run_lockstep(cfg, 3.5, seed=0)
     s = sc.summary()
     hidden = [f for f in sc.truth_frames if f.hidden]
     assert hidden and all(f.status in ("coasting", "lost") for f in hidden), s
