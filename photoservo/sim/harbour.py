@@ -221,6 +221,23 @@ def _photos(rng: np.random.Generator, seed: int, kind: str, other_photo: bool, m
     return creature, render_photo, model_A, photo, build_photo_model(photo, photo_params)
 
 
+#: the effects every harbour scene has (its truth's "effects")
+EFFECTS = ("light", "waves", "glitter", "noise", "blur", "vignetting", "foam", "debris")
+
+
+def _truth(T_lm: np.ndarray, empty: bool, other_photo: bool, model_A: PhotoModel, model_B: PhotoModel,
+           alpha_A: float) -> dict:
+    """The estimate JSON of DESIGN.md for the estimator's photo-model (model_B; the creature was
+    drawn from model_A at alpha_A px/mm), the creature's model frame in the true left camera
+    frame being T_lm (4x4, mm), with distance_mm, same_photo and creature_size_mm."""
+    R = T_lm[:3, :3]
+    alpha, origin_mm = (alpha_A, np.zeros(3)) if not other_photo else match_individuals(model_A, model_B, alpha_A)
+    wA, hA = model_A.size_px
+    return {**scene_truth(empty, R, R @ origin_mm + T_lm[:3, 3], alpha, model_B),
+            "distance_mm": float(T_lm[2, 3]), "same_photo": not other_photo,
+            "creature_size_mm": [float(wA / alpha_A), float(hA / alpha_A)]}
+
+
 def random_scene(seed: int, params: SynthParams, photo_params: PhotoModelParams, kind: str = "squid",
                  other_photo: bool = False, empty: bool = False, distractor: bool = False,
                  foam_split: bool = False, many_hued: bool = False, distance_mm: float | None = None,
@@ -240,11 +257,9 @@ def random_scene(seed: int, params: SynthParams, photo_params: PhotoModelParams,
     visible region in two. many_hued (fish): the many-hued creature (see `draw_creature`).
     Without foam_split, a third of the scenes get a foam patch over ~12 % of the creature.
 
-    Truth: the estimate JSON of DESIGN.md for the estimator's photo-model (built from
-    `SyntheticScene.photo` with `photo_params`) in the true left camera frame, plus distance_mm,
-    tilt_deg, same_photo, creature_size_mm, calibration_error, effects, distractors, seed,
-    generator, kind, many_hued, foam_split (the band really cuts the creature in two), foam_cover
-    (share of the creature under foam, left image) and light."""
+    Truth (`_truth`, and): calibration_error, effects, distractors, seed, generator, kind,
+    many_hued, foam_split (the band really cuts the creature in two), foam_cover (share of the
+    creature under foam, left image) and light."""
     if kind not in KINDS:
         raise InputError(f"kind '{kind}': choose from {', '.join(KINDS)}")
     if many_hued and kind != "fish":
@@ -274,27 +289,12 @@ def random_scene(seed: int, params: SynthParams, photo_params: PhotoModelParams,
     left, cov_l = render_camera(scene, rig_true.left, T_wl, light.white_balance[0], noise_rng)
     right, cov_r = render_camera(scene, rig_true.right, T_wr, light.white_balance[1], noise_rng)
     scene = dataclasses.replace(scene, coverage=(cov_l[0], cov_r[0]))
-    # ground truth for the estimator's photo-model
-    T_lm = np.linalg.inv(T_wl) @ T_wm
-    R = T_lm[:3, :3]
-    alpha, origin_mm = (alpha_A, np.zeros(3)) if not other_photo else match_individuals(model_A, model_B, alpha_A)
     foam_cover = 0.0 if empty else float(np.clip(1 - cov_l[0].sum() / max(float(cov_l[1].sum()), 1e-6), 0, 1))
-    truth = {
-        **scene_truth(empty, R, R @ origin_mm + T_lm[:3, 3], alpha, model_B),
-        "distance_mm": float(T_lm[2, 3]),
-        "same_photo": not other_photo,
-        "creature_size_mm": [float(wA / alpha_A), float(hA / alpha_A)],
-        "calibration_error": calib,
-        "effects": ["light", "waves", "glitter", "noise", "blur", "vignetting", "foam", "debris"],
-        "distractors": [dinfo] if dinfo else [],
-        "seed": int(seed),
-        "generator": "harbour",
-        "kind": kind,
-        "many_hued": bool(many_hued),
-        "foam_split": bool(split),
-        "foam_cover": round(foam_cover, 4),
-        "light": {"gain": light.gain, "cast_bgr": [float(v) for v in light.cast], "noise_dn": light.noise,
-                  "blur_px": light.blur, "sun_elevation_deg": sun_elevation},
-    }
+    light_truth = {"gain": light.gain, "cast_bgr": [float(v) for v in light.cast], "noise_dn": light.noise,
+                   "blur_px": light.blur, "sun_elevation_deg": sun_elevation}
+    truth = {**_truth(np.linalg.inv(T_wl) @ T_wm, empty, other_photo, model_A, model_B, alpha_A),
+             "calibration_error": calib, "effects": list(EFFECTS), "distractors": [dinfo] if dinfo else [],
+             "seed": int(seed), "generator": "harbour", "kind": kind, "many_hued": bool(many_hued),
+             "foam_split": bool(split), "foam_cover": round(foam_cover, 4), "light": light_truth}
     return SyntheticScene(left=left, right=right, rig=rig, rig_true=rig_true, truth=truth, photo=photo,
                           render_photo=render_photo, scene=scene, T_world_left=T_wl)
