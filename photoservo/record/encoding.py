@@ -6,9 +6,9 @@ already waiting (counted in `wait_s`). `video` encodes both cameras' watch-only 
 (`record.video`) and never holds the loop up: while it is more than VIDEO_LAG_S of loop time
 behind, frames are left out of the video (counted in `video_dropped`), so on a machine short of
 CPU the video's frame rate falls and the loop's does not (a test or a lockstep run, which logs
-frames faster or slower than real time but never that far ahead of the worker, keeps them all). The video also keeps at most `video_fps`
-frames a second ([recording] video_fps; 0 = every frame): encoding is most of a recording's
-CPU (benchmarks/recording.py). cv2 releases the GIL while it encodes the planes; PyAV does not,
+frames faster or slower than real time but never that far ahead of the worker, keeps them
+all). The video also keeps at most `video_fps` frames a second ([recording] video_fps; 0 =
+every frame): encoding is most of a recording's CPU (benchmarks/recording.py). cv2 releases the GIL while it encodes the planes; PyAV does not,
 so the video is encoded in a child process (`video.EncoderProcess`). The workers thus use a
 spare core while the loop runs; the loop copies the frame, hands it over and goes on.
 """
