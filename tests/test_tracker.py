@@ -13,7 +13,8 @@ from photoservo.vision.pose_search import GeneSpace
 from photoservo.vision.fitness import stereo_hue
 from photoservo.sim.renderer import Foam, Scene
 from photoservo.vision.estimator import acquisition, estimate
-from photoservo.vision.tracker import Tracker, on_plane
+from photoservo.vision.tracker import Tracker
+from photoservo.vision.water_search import on_plane
 
 
 @pytest.fixture(scope="module")

@@ -38,9 +38,29 @@ def water_gate(T_base_model: np.ndarray, water_z_mm: float, margin_mm: float, ma
     >>> water_gate(T, -100.0, 40.0, 25.0), water_gate(T, -160.0, 40.0, 25.0), water_gate(T, float("nan"), 40.0, 25.0)
     ('', 'plane', '')
     """
+    off, tilted = water_gates(np.array([T_base_model[2, 3]]), np.array([T_base_model[2, 2]]), water_z_mm,
+                              margin_mm, max_tilt_deg)
+    return "plane" if off[0] else "tilt" if tilted[0] else ""
+
+
+def on_water(T_base_left: np.ndarray, R: np.ndarray, t: np.ndarray, water_z_mm: float, margin_mm: float,
+             max_tilt_deg: float) -> np.ndarray:
+    """`water_gate` of many poses at once: (N,) True where a pose (R (N,3,3), t (N,3) mm: model
+    in the left camera at T_base_left) passes both tests (all True on unknown water). The tracker
+    searches only such poses (vision/tracker.py): a search left a generation or two per frame
+    otherwise settles on a tilted or sunken pose that scores well and is no measurement."""
+    z = t @ T_base_left[2, :3] + T_base_left[2, 3]
+    normal_z = R[:, :, 2] @ T_base_left[2, :3]
+    off, tilted = water_gates(z, normal_z, water_z_mm, margin_mm, max_tilt_deg)
+    return ~(off | tilted)
+
+
+def water_gates(z_mm: np.ndarray, normal_z: np.ndarray, water_z_mm: float, margin_mm: float,
+                max_tilt_deg: float) -> tuple[np.ndarray, np.ndarray]:
+    """The two water tests on model origins' heights z_mm and model normals' z components
+    normal_z (base frame, z up): (off the plane by more than margin_mm, tilted past
+    max_tilt_deg); both all False when the plane is unknown (nan)."""
     if not math.isfinite(water_z_mm):
-        return ""
-    if abs(T_base_model[2, 3] - water_z_mm) > margin_mm:
-        return "plane"
-    cos_tilt = -float(T_base_model[2, 2])  # model z . (0, 0, -1)
-    return "tilt" if cos_tilt < math.cos(math.radians(max_tilt_deg)) else ""
+        return np.zeros(len(z_mm), bool), np.zeros(len(z_mm), bool)
+    off = np.abs(z_mm - water_z_mm) > margin_mm
+    return off, ~off & (-normal_z < math.cos(math.radians(max_tilt_deg)))  # normal . (0, 0, -1)

@@ -31,7 +31,14 @@ seed — spread over frames: each frame runs `acquire_generations` of its GA gen
 count, so a replay runs the same search), on the frame it started on (the creature was seen
 there). When it ends, the candidates that passed detection are filtered, with a track before,
 to those of the track's size (alpha within `size_tolerance`), and the one nearest the prediction
-at that frame's time is the measurement; the tracking search restarts around it.
+at that frame's time is the measurement; the tracking search restarts around it. When the search
+ended on a newer frame (at 2-5 fps its answer is seconds old) the answer is measured again on
+that frame (`_confirm`: blob pairs near it seeded, the rest of the frame's acquire_generations)
+and counts only if it passes there; otherwise the track is lost at once.
+
+On known water the tracking search scores only poses that pass the water gates
+(vision/water_search.py): with a generation or two per frame (a loaded machine) it otherwise
+settles on tilted or sunken poses that score well and are no measurement.
 
 Pure: arrays in, arrays out; time is whatever clock the caller stamps frames with (s).
 """
@@ -56,6 +63,7 @@ from photoservo.vision.photo_model import PhotoModel
 from photoservo.vision.pose_search import Candidate, PoseSearch
 from photoservo.vision.rig import Rig
 from photoservo.vision.reacquisition import choose, near_pairs, window_region
+from photoservo.vision.water_search import on_plane, on_water_fitness
 from photoservo.vision.seeding import BlobPair
 
 Status = Literal["acquiring", "tracking", "coasting", "lost", "out_of_view"]
@@ -229,19 +237,21 @@ class Tracker:
         n = n_acq = 0
         far = False
         if self.search is not None:
-            near, far = self._pairs(frame, T_left_base, t)
+            near, far = self._pairs(frame, T_left_base, t) if self.status == "lost" else ([], False)
             m, best, n = self._measure_step(frame, T_base_left, T_left_base, T_new_old, t, gens, near)
         if m is None and (self.search is None or far or self.acquiring is not None
                           or (self.status == "lost" and t - self.t_last > LOCAL_SEARCH_S)):
             acq, n_acq = self._acquire_step(frame, left_bgr, right_bgr, T_base_left, t)
-            if acq is not None:  # found on the frame it started on: taken, then tracked on to this one
+            if acq is not None:  # found on the frame it started on: taken, then confirmed on this one
                 self._accept(acq)
                 self._restart_search(frame, T_left_base @ acq.T_base_model, acq.c.alpha)
                 if acq.t < t:
-                    m, best, n = self._measure_step(frame, T_base_left, T_left_base, None, t, gens, [])
+                    m, best, n = self._confirm(frame, T_base_left, T_left_base, t, n_acq, max_generations)
+                    if m is None:  # the creature moved on from where it was found: a track lost already
+                        acq, self.misses = None, self.p.lost_frames - 1
         if m is not None:
             self.acquiring = None
-            self._accept(m)
+            self._accept(m, restart=acq is not None)
         elif acq is None:
             self._miss(t, T_left_base)
         m = m or acq
@@ -257,12 +267,25 @@ class Tracker:
             acquire_generations=n_acq, coast_s=0.0 if self.t_last is None else max(0.0, t - self.t_last),
         )
 
+    def _confirm(self, frame: StereoHue, T_base_left: np.ndarray, T_left_base: np.ndarray, t: float, n_acq: int,
+                 max_generations: int | None) -> tuple[_Measured | None, Candidate | None, int]:
+        """A whole-volume search spread over frames ends on a frame newer than the one it
+        searched: its answer is stale (at 2-5 fps, seconds old). It is measured again on this
+        frame before the arm may use it: the tracking search around it, its window grown with
+        the answer's age, the target-hue blob pairs near it seeded with its orientation and
+        size, for the rest of this frame's acquire_generations (at least generations_per_frame;
+        not cut by the time budget, like the whole-volume search itself)."""
+        gens = max(self.p.generations_per_frame, self.p.acquire_generations - n_acq) if max_generations is None \
+            else max_generations
+        near, _ = self._pairs(frame, T_left_base, t)
+        return self._measure_step(frame, T_base_left, T_left_base, None, t, gens, near, budget=False)
+
     def _measure_step(self, frame: StereoHue, T_base_left: np.ndarray, T_left_base: np.ndarray,
                       T_new_old: np.ndarray | None, t: float, gens: int,
-                      near: list[BlobPair]) -> tuple[_Measured | None, Candidate | None, int]:
-        """The tracking search on this frame (`_track_step`) and its best pose tested: (the
-        measurement or None, the best pose, the generations run)."""
-        best, n = self._track_step(frame, T_left_base, T_new_old, t, gens, near)
+                      near: list[BlobPair], budget: bool = True) -> tuple[_Measured | None, Candidate | None, int]:
+        """The tracking search on this frame (`_track_step`; `budget`: cut by the time budget)
+        and its best pose tested: (the measurement or None, the best pose, the generations run)."""
+        best, n = self._track_step(frame, T_left_base, T_new_old, t, gens, near, budget)
         if best is None or not self._measurement(best, T_base_left, t):
             return None, best, n
         return _Measured(best, T_base_left @ make_pose(best.R, best.position_mm), t), best, n
@@ -291,13 +314,14 @@ class Tracker:
 
     # ------------------------------------------------------------------ status
 
-    def _accept(self, m: _Measured) -> None:
-        """A measurement: tracking. Found again after a loss, the position is taken as measured
-        (the prediction is old) and the velocity kept; after leaving the view, or by the
-        whole-volume search, the motion model starts afresh."""
+    def _accept(self, m: _Measured, restart: bool = False) -> None:
+        """A measurement: tracking. Found again after a loss, or confirming a whole-volume
+        search's older answer (`restart`), the position is taken as measured (the prediction is
+        old) and the velocity kept; after leaving the view, or by the whole-volume search, the
+        motion model starts afresh."""
         if self.status == "out_of_view" or m.acquired:
             self.p_base, self.t_last, self.v_base = None, None, np.zeros(3)
-        self._correct(m.T_base_model, m.c.alpha, m.t, restart=self.status == "lost")
+        self._correct(m.T_base_model, m.c.alpha, m.t, restart=restart or self.status == "lost")
         self.misses = 0
         self.status = "tracking"
 
@@ -367,11 +391,11 @@ class Tracker:
         return None, n
 
     def _pairs(self, frame: StereoHue, T_left_base: np.ndarray, t: float) -> tuple[list[BlobPair], bool]:
-        """Lost: the blob pairs near the predicted track (within the grown window plus the
-        creature's length: seeded into the search around it), and whether any lie only farther
-        away (then the whole volume is searched too). Otherwise ([], False)."""
+        """The blob pairs near the predicted track (within the grown window plus the creature's
+        length: seeded into the search around it; lost, or confirming), and whether any lie only
+        farther away (then the whole volume is searched too). ([], False) without a track."""
         T_pred = self.predict(t)
-        if self.status != "lost" or T_pred is None:
+        if T_pred is None:
             return [], False
         reach = self._grown(t - self.t_last) + max(self.model.size_mm(self.alpha))
         return near_pairs(frame, self.model, self.rig, self.est_params, (T_left_base @ T_pred)[:3, 3], reach)
@@ -419,9 +443,10 @@ class Tracker:
         s.ga.set_genes(g)
 
     def _track_step(self, frame: StereoHue, T_left_base: np.ndarray, T_new_old: np.ndarray | None, t: float,
-                    max_generations: int, near: list[BlobPair]) -> tuple[Candidate | None, int]:
+                    max_generations: int, near: list[BlobPair], budget: bool = True) -> tuple[Candidate | None, int]:
         """A few generations in the window around the prediction (lost: the track's pose moved
-        onto each blob pair `near` it is seeded too); the best pose and the generations run."""
+        onto each blob pair `near` it is seeded too), stopped at the time budget (real time,
+        `budget`); the best pose and the generations run."""
         s = self.search
         if T_new_old is not None:
             self._rebase(T_new_old)
@@ -430,6 +455,9 @@ class Tracker:
         if plane:
             K, wz = self.rig.left.K, self.p.water_z_mm
             s.ga.set_fitness(lambda g: s._fitness(on_plane(g, K, T_left_base, wz)))
+        elif math.isfinite(self.p.water_z_mm):
+            s.ga.set_fitness(on_water_fitness(s, invert_pose(T_left_base), self.p.water_z_mm,
+                                              self.p.plane_margin_mm, self.p.max_tilt_deg))
         T_pred = self.predict(t)
         if T_pred is not None:
             T_lm = T_left_base @ T_pred
@@ -443,7 +471,7 @@ class Tracker:
         while n < max_generations:
             s.step(1)
             n += 1
-            if self.time_budget and time.perf_counter() >= t_end:
+            if budget and self.time_budget and time.perf_counter() >= t_end:
                 break
         if plane:
             g, f = s.ga.best()
@@ -460,28 +488,3 @@ def _in_camera(m: _Measured, T_left_base: np.ndarray) -> Candidate:
         return m.c
     T = T_left_base @ m.T_base_model
     return Candidate(T[:3, :3], T[:3, 3], m.c.alpha, m.c.fitness, m.c.generations, m.c.source, m.c.aspect)
-
-
-def on_plane(g: np.ndarray, K: np.ndarray, T_left_base: np.ndarray, water_z_mm: float) -> np.ndarray:
-    """Plane search (issue 5, Tracking): image-coded genes (u, v, q, psi, tilt_x, tilt_y, ln s)
-    (vision/estimator.py) with the inverse depth q and the tilt replaced by those of a target
-    lying flat on the water plane z = water_z_mm (base frame): the ray through (u, v) meets the
-    plane at depth z, and the model normal (model z, down into the water) is -z_base seen from
-    the camera. Only (u, v), the heading psi and the scale remain free."""
-    g = np.array(g, dtype=np.float64, copy=True)
-    R_lb = T_left_base[:3, :3]
-    n = R_lb[:, 2]  # base z (up) in the left camera frame
-    p0 = T_left_base[:3, :3] @ np.array([0.0, 0.0, water_z_mm]) + T_left_base[:3, 3]
-    xn = (g[:, 0] - K[0, 2]) / K[0, 0]
-    yn = (g[:, 1] - K[1, 2]) / K[1, 1]
-    denom = n[0] * xn + n[1] * yn + n[2]
-    with np.errstate(divide="ignore", invalid="ignore"):
-        z = (n @ p0) / denom
-    ok = np.isfinite(z) & (z > 1.0)
-    g[ok, 2] = 1000.0 / z[ok]
-    m = -n  # model normal
-    th = math.atan2(math.hypot(m[0], m[1]), m[2])
-    ax, ay = -m[1], m[0]
-    norm = math.hypot(ax, ay)
-    g[:, 4], g[:, 5] = (ax / norm * th, ay / norm * th) if norm > 1e-12 else (0.0, 0.0)
-    return g
