@@ -298,40 +298,35 @@ class Frame:
 
 
 def cobs_encode(data: bytes) -> bytes:
-    """Consistent Overhead Byte Stuffing (Cheshire & Baker 1999): output has no 0x00 byte."""
+    """Consistent Overhead Byte Stuffing (Cheshire & Baker 1999): output has no 0x00 byte.
+    Each run between zero bytes becomes a code byte (run length + 1) and the run; a run of 254
+    non-zero bytes is closed with code 255 and no implied zero. The runs are found with
+    bytes.split (a per-byte Python loop cost the emulator and the link ~0.1 ms a frame)."""
     out = bytearray()
-    block = bytearray()
-    for b in data:
-        if b == 0:
-            out.append(len(block) + 1)
-            out += block
-            block.clear()
-        else:
-            block.append(b)
-            if len(block) == 254:
-                out.append(255)
-                out += block
-                block.clear()
-    out.append(len(block) + 1)
-    out += block
+    for run in bytes(data).split(b"\x00"):
+        while len(run) >= 254:
+            out.append(255)
+            out += run[:254]
+            run = run[254:]
+        out.append(len(run) + 1)
+        out += run
     return bytes(out)
 
 
 def cobs_decode(data: bytes) -> bytes:
     """Inverse of cobs_encode; raises ProtocolError('cobs_errors', ...) on an invalid stuffing."""
+    data = bytes(data)
+    zero = data.find(0)
+    if zero >= 0:
+        raise ProtocolError("cobs_errors", f"zero byte at {zero}")
     out = bytearray()
     i, n = 0, len(data)
     while i < n:
         code = data[i]
-        if code == 0:
-            raise ProtocolError("cobs_errors", f"zero byte at {i}")
         end = i + code
         if end > n:
             raise ProtocolError("cobs_errors", f"block at {i} runs past the end")
-        block = data[i + 1:end]
-        if 0 in block:
-            raise ProtocolError("cobs_errors", f"zero byte inside block at {i}")
-        out += block
+        out += data[i + 1:end]
         i = end
         if code != 255 and i < n:
             out.append(0)
