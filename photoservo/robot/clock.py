@@ -70,6 +70,40 @@ def raise_priority(priority: int, nice: int = -10) -> str:
         return "normal"
 
 
+def lower_priority(nice: int, keep: set[int] | frozenset[int] = frozenset()) -> str:
+    """The other side of `raise_priority` when it got no real-time class: raise the niceness of
+    every thread of this process and of its descendant processes to at least `nice` (always
+    permitted), except the processes or threads whose ids are in `keep` (a kept process keeps
+    its descendants too). The loops that must hold their period (the control process, the
+    simulator's bridge) then win the CPU from the work that can wait (vision, the renderer, the
+    video encoder). Linux (/proc); returns what was done, for the session's events."""
+    threads, procs = 0, 0
+    todo = [os.getpid()]
+    while todo:
+        pid = todo.pop()
+        if pid in keep:
+            continue
+        try:
+            tids = [int(t) for t in os.listdir(f"/proc/{pid}/task")]
+        except OSError:  # ended meanwhile, or no /proc
+            continue
+        procs += 1
+        for tid in tids:
+            try:
+                todo += [int(c) for c in open(f"/proc/{pid}/task/{tid}/children").read().split()]
+            except OSError:
+                pass
+            if tid in keep:
+                continue
+            try:
+                if os.getpriority(os.PRIO_PROCESS, tid) < nice:
+                    os.setpriority(os.PRIO_PROCESS, tid, nice)
+                    threads += 1
+            except OSError:
+                pass
+    return f"nice {nice} for {threads} threads of {procs} processes"
+
+
 #: Ctrl-C, SIGTERM, SIGHUP: a terminal, `timeout` or systemd may send them to a whole process group
 STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
 

@@ -52,6 +52,11 @@ class Bridge(ABC):
     @abstractmethod
     def true_state(self) -> ArmState: ...
 
+    @property
+    @abstractmethod
+    def ids(self) -> frozenset[int]:
+        """The process or thread ids that run the bridge (a session leaves their priority)."""
+
     def __enter__(self) -> Self:
         self.start()
         return self
@@ -124,6 +129,11 @@ class Emulator(Bridge):
         self._thread = threading.Thread(target=self._run, name="pa10-emulator", daemon=True)
         self._thread.start()
         return self.path
+
+    @property
+    def ids(self) -> frozenset[int]:
+        t = self._thread
+        return frozenset() if t is None or t.native_id is None else frozenset({t.native_id})
 
     def stop(self) -> None:
         """Stop the thread and close the pty (the host sees the bridge go away)."""

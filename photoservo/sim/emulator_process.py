@@ -90,6 +90,11 @@ class EmulatorProcess(Bridge):
         _, self.path, self.scheduling = self._conn.recv()
         return self.path
 
+    @property
+    def ids(self) -> frozenset[int]:
+        pid = self._proc.pid
+        return frozenset() if pid is None else frozenset({pid})
+
     def stop(self) -> None:
         """Stop the bridge (the pty closes) and collect its counters."""
         self._stop.set()

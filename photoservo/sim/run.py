@@ -165,6 +165,7 @@ def run_sim_realtime(cfg: Config, duration_s: float, sim: SimSetup, emulator, **
             cams.start(t0)
             return t0
         return run_realtime(cfg, duration_s, port=emulator.path, read_frame=cams.read, model=sim.scene.model,
-                            rig=sim.rig, truth=sim.truth, simulated=True, start_clock=start_clock, **kwargs)
+                            rig=sim.rig, truth=sim.truth, simulated=True, start_clock=start_clock,
+                            keep_ids=emulator.ids, **kwargs)
     finally:
         cams.disconnect()

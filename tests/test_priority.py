@@ -1,0 +1,38 @@
+"""robot/clock.py's `lower_priority`: the session's work that can wait steps back, the loops that
+must hold their period (kept ids) do not. Run in a child process: niceness cannot be lowered
+again without privilege, so the test process itself must not be touched."""
+
+import json
+import subprocess
+import sys
+import textwrap
+
+
+def test_lower_priority_nices_this_process_and_its_children_but_not_the_kept_ones():
+    script = textwrap.dedent("""
+        import json, os, subprocess, sys, threading, time
+        from photoservo.robot.clock import lower_priority
+        sleep = [sys.executable, "-c", "import time; time.sleep(30)"]
+        kept, other = subprocess.Popen(sleep), subprocess.Popen(sleep)
+        worker_ready, stop = threading.Event(), threading.Event()
+        tid = {}
+        def work():
+            tid["worker"] = threading.get_native_id(); worker_ready.set(); stop.wait()
+        threading.Thread(target=work, daemon=True).start()
+        worker_ready.wait()
+        time.sleep(0.2)  # the children have started
+        nice = lambda i: os.getpriority(os.PRIO_PROCESS, i)
+        base = nice(0)
+        done = lower_priority(base + 5, keep={kept.pid})
+        print(json.dumps({"done": done, "base": base, "main": nice(threading.get_native_id()), "worker": nice(tid["worker"]),
+                          "kept": nice(kept.pid), "other": nice(other.pid)}))
+        for p in (kept, other):
+            p.kill(); p.wait()
+    """)
+    out = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=60)
+    assert out.returncode == 0, out.stderr
+    got = json.loads(out.stdout)
+    base = got["base"]
+    assert got["main"] == got["worker"] == got["other"] == base + 5, got
+    assert got["kept"] == base, got
+    assert got["done"].startswith(f"nice {base + 5} for ") and "of 2 processes" in got["done"], got
