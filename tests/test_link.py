@@ -428,3 +428,44 @@ def test_line_stalls_trip_the_watchdog_but_never_move_a_joint():
         assert e.model.accepted > 150
         np.testing.assert_allclose(e.true_state().q, q0, atol=1e-7)
         lk._servo_requested = False
+
+
+
+
+def _stream_half_speed(link: Link, periods: int, pause_at: int = -1, pause_s: float = 0.0,
+                       on_period=None) -> None:
+    """Ramp S1 to half speed and stream it for `periods` control periods; the host stops sending
+    for `pause_s` after period `pause_at` (a stalled host), then goes on along its own plan,
+    except that while the link holds setpoints back it starts again from the measured state."""
+    q = link.wait_state().q
+    v = np.zeros(7)
+    held = link.setpoints_held
+    t_next = time.monotonic()
+    for k in range(periods):
+        if k == pause_at:
+            time.sleep(pause_s)
+            t_next += pause_s
+        v[0] = min(v[0] + LIMITS.ddq_max[0] * T * 0.9, LIMITS.dq_max[0] * 0.5)
+        if link.setpoints_held > held:
+            held = link.setpoints_held
+            s = link.state()
+            q, v = s.q.copy(), s.dq.copy()
+        q = q + v * T
+        link.send_setpoint(q, v)
+        if on_period is not None:
+            on_period(k, q)
+        t_next += T
+        time.sleep(max(0.0, t_next - time.monotonic()))
+
+
+def test_no_setpoint_sent_into_the_bridges_controlled_stop(emu, link):
+    """The host stalls for 40 ms in a half-speed move: the bridge's watchdog stops the arm. While
+    the bridge reports STOPPING the host sends nothing (each setpoint would be refused; under load
+    86-121 SERVO_OFF refusals a second tripped the link-quality gate), then it streams again from
+    the measured state and the bridge takes it."""
+    link.enable()
+    _stream_half_speed(link, 300, pause_at=150, pause_s=0.04)
+    m = emu.model
+    assert m.watchdog_stops >= 1 and link.setpoints_held > 0, (m.watchdog_stops, link.setpoints_held)
+    assert m.refusals.get("SERVO_OFF", 0) <= 2, m.refusals  # those in flight when the stop began
+    assert link.wait_state().status & P.Status.TRACKING  # streaming again, accepted

@@ -61,6 +61,7 @@ class Link(Arm):
         self.version: P.VersionInfo | None = None
         self.setpoints_sent = 0
         self.setpoints_dropped = 0
+        self.setpoints_held = 0  # not sent: the bridge was making a controlled stop
         self.nacks: deque[P.Nack] = deque(maxlen=64)  # the last 64 NACKs
         self.refused = 0  # setpoints the bridge refused (NACK), all of them
         self._ser: serial.SerialBase | None = None
@@ -205,12 +206,20 @@ class Link(Arm):
     def send_setpoint(self, q, dq, t_host: float | None = None) -> int | None:
         """Send one joint setpoint (rad, rad/s) stamped `t_host` (default now). Never blocks:
         returns its sequence number, or None when the line was still busy with earlier bytes
-        (the setpoint is dropped and counted in `setpoints_dropped`).
+        (the setpoint is dropped and counted in `setpoints_dropped`), or when the latest state
+        report says the bridge is making a controlled stop (its watchdog's, or one asked for):
+        it refuses setpoints until the arm is at rest, so none is sent (`setpoints_held`). The
+        caller's motion re-plans from the measured state once the bridge takes them again.
 
         Raises:
             LinkError: the bridge has gone silent or away.
         """
         self._check(quality=True)
+        with self._cond:
+            stopping = bool(self._history) and bool(self._history[-1].status & P.Status.STOPPING)
+        if stopping:
+            self.setpoints_held += 1
+            return None
         t = time.monotonic() if t_host is None else t_host
         msg = P.JointSetpoint(int(t * 1e6), tuple(np.asarray(q, float).tolist()),
                               tuple(np.asarray(dq, float).tolist()))

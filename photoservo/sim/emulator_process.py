@@ -61,7 +61,7 @@ def _emulator_main(params: EmulatorParams, limits: PA10Limits, q0, shared, conn,
         emu.stop()
         m = emu.model
         conn.send(("done", repr(emu.error) if emu.error else "", {
-            "accepted": m.accepted, "refused": m.refused, "watchdog_stops": m.watchdog_stops,
+            "accepted": m.accepted, "refused": m.refused, "refusals": dict(m.refusals), "watchdog_stops": m.watchdog_stops,
             "tick_overruns": emu.tick_overruns, "states_skipped": emu.states_skipped, "end": m.describe_end()}))
 
 
