@@ -231,24 +231,39 @@ class Emulator(Bridge):
         return throttled
 
     def _tick(self, now: float, silent: bool) -> None:
-        """One control tick of the model (published through on_tick); every state period a
-        state report, unless the line is still busy with the last one."""
+        """The control ticks of the model due by `now` (each published through on_tick); every
+        state period a state report, unless the line is still busy with the last one.
+
+        When this thread fell behind (the simulator's process was not scheduled), the missed
+        ticks still move the arm: a real arm does not pause while its bridge's emulator waits for
+        the CPU. They run back to back on the setpoint the host has sent meanwhile (read just
+        before), and one state report follows, not a burst. Only a stall longer than the brake
+        timeout is skipped (counted in tick_overruns)."""
+        T = self._T
         with self._lock:
-            self.model.tick(self._next_tick)
+            m = self.model
+            behind = int((now - self._next_tick) / T)
+            if behind > self.params.brake_after_s / T:
+                self.tick_overruns += 1
+                self._next_tick += behind * T
+            elif behind > 0:
+                for _ in range(behind):
+                    m.tick(self._next_tick)
+                    if self.on_tick is not None:
+                        self.on_tick(self._next_tick, m.q, m.dq, int(m.status()), int(m.fault))
+                    self._next_tick += T
+                self._n_tick += behind
+            m.tick(self._next_tick)
             if self.on_tick is not None:
-                m = self.model
                 self.on_tick(self._next_tick, m.q, m.dq, int(m.status()), int(m.fault))
             self._n_tick += 1
-            if self._n_tick % self._state_every == 0 and not silent:
+            if (self._n_tick % self._state_every == 0 or behind > 0) and not silent:
                 if len(self._tx_buf) + self.tx_faults.queued_bytes() > self._frame_len:
                     self.states_skipped += 1
                 else:
-                    self._send(self.model.report(), now)
+                    self._send(m.report(), now)
                     self.states_sent += 1
-        self._next_tick += self._T
-        if now - self._next_tick > 5 * self._T:  # fell far behind (machine stalled): do not burst
-            self.tick_overruns += 1
-            self._next_tick = now + self._T
+        self._next_tick += T
 
     def _transmit(self, now: float, silent: bool) -> None:
         """Write what the line can carry now of the queued replies and reports."""
