@@ -293,6 +293,9 @@ def _finish(args, cfg, status: _StatusLine, session) -> int:
     stop: KeyboardInterrupt | None = None
     try:
         sc = session(held)
+        if held.get("rec") is not None:  # what ended the session, where the event log shows it
+            for f in sc.faults:
+                held["rec"].event(held["rec"].last_t, f"fault: {f}", level="ERROR")
     except KeyboardInterrupt as e:
         stop = e
     finally:

@@ -241,10 +241,9 @@ class ControlJob:
 #: SCHED_FIFO priority the control process asks for when no --rt-priority is given (below the
 #: simulator's bridge, sim/emulator_process.py, which it waits on)
 CONTROL_RT_PRIORITY = 20
-#: niceness of the session's other processes and threads (vision, renderer, video encoder) when
-#: the control process got no real-time class: a CPU share of ~1/10 against the control loop and
-#: the bridge when all want the CPU. Measured (non-root, load 8-11, `track --sim`, 4 runs each):
-#: control lateness median 0.6-1.8 ms -> 0.08-0.10 ms.
+#: niceness of the session's other processes and threads (vision, renderer, video encoder) when the
+#: control process got no real-time class: ~1/10 of the CPU against the control loop and the bridge
+#: (non-root, load 8-15, `track --sim`: control lateness medians 0.5-4.8 ms -> 0.08-0.16 ms).
 BACKGROUND_NICE = 10
 
 
@@ -391,18 +390,20 @@ class _ControlProcess:
         done = lower_priority(BACKGROUND_NICE, keep={self.proc.pid, *keep_ids})
         return [(0.0, f"control process without real-time priority: the rest of the session steps back ({done})")]
 
-    def send(self, track: Track) -> bool:
-        """Send a track to the control process; False when it has ended already."""
+    def send(self, msg: Track | tuple) -> bool:
+        """Send a track (or the clock's start); False when the control process has ended."""
         try:
-            self.conn.send(track)
+            self.conn.send(msg)
         except (BrokenPipeError, EOFError, OSError):
             return False
         return True
 
     def start_clock(self, t0: float) -> None:
-        """The session's clock starts at t0 (monotonic s): the control process scores from it."""
+        """The session's clock starts at t0 (monotonic s): the control process scores from it. If
+        it has ended already (a fault as it started), the session stops; its report says why."""
         self.t0 = t0
-        self.conn.send(("t0", t0))
+        if not self.send(("t0", t0)):
+            self.stop.set()
 
     def close(self) -> Scores | None:
         """Stop the process; its scores (None: it ended without a report)."""
