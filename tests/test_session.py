@@ -283,3 +283,72 @@ def test_a_link_fault_as_the_control_process_starts_is_exit_3_not_a_traceback():
                        capture_output=True, text=True, timeout=300)
     assert p.returncode == 3 and "Traceback" not in p.stderr, p.stderr[-2000:]
     assert "fault: Link" in p.stdout and "HELLO" in p.stdout, p.stdout  # LinkError or LinkQualityError
+
+
+#: a search pose for the simulator's scene (joints, deg): the rig 800 mm over the water at
+#: (700, 200) mm, ahead of the creature's drift, looking straight down (pa10.ik of that pose)
+SIM_SEARCH_POSE_DEG = [14.8, 37.4, 3.4, 28.2, -2.3, 114.5, 16.6]
+
+
+def _gone(t, status="out_of_view"):
+    return Track(t=t, status=status, found=False, fitness=0.2, T_base_model=None, velocity_mm_s=np.zeros(3),
+                 alpha=2.0, size_mm=(130.0, 42.0), R_left=None, t_left=None, alpha_measured=None,
+                 generations=8, seconds=0.01)
+
+
+def test_controller_moves_to_the_search_pose_out_of_view_and_servos_again_once_found(cfg):
+    """[servo] search_pose_deg: lost in view, the arm holds; out of view, a jerk-limited move to
+    the configured joints, carried on whatever the tracker says meanwhile (lost, acquiring) and
+    never from an estimate; a fresh pose ends the search, an old one does not."""
+    from photoservo.servo.session import controller_for
+    from photoservo.sim.run import sim_rig
+
+    c = dataclasses.replace(cfg, servo=dataclasses.replace(cfg.servo, search_pose_deg=tuple(SIM_SEARCH_POSE_DEG)))
+    ctrl = controller_for(c, sim_rig())
+    q, dq, t, dt = build_sim(cfg).q0, np.zeros(7), 0.0, 1.0 / cfg.motion.rate_hz
+    info = ctrl.step(t, q, dq, _gone(t, "lost"))
+    assert ctrl.phase == "servo" and info.stop_reason == "no target"  # lost in view: hold
+    speeds = []
+    for i in range(int(8.0 / dt)):
+        info = ctrl.step(t, q, dq, _gone(t, ("out_of_view", "lost", "acquiring")[min(i // 100, 2)]))
+        q, dq, t = info.setpoint.q, info.setpoint.dq, t + dt
+        speeds.append(np.max(np.abs(dq) / pa10.load_limits().dq_max))
+        if info.stop_reason == "at the search pose":
+            break
+    assert ctrl.phase == "search" and info.stop_reason == "at the search pose", info.stop_reason
+    assert np.degrees(np.abs(q - np.radians(SIM_SEARCH_POSE_DEG))).max() < 0.1 and max(speeds) <= 1.0 + 1e-9
+    assert ctrl.events[0][1].startswith("phase search")
+    T = np.eye(4)
+    T[:3, :3] = np.diag([1.0, -1.0, -1.0])
+    T[:3, 3] = [700.0, 200.0, -100.0]
+    old = _track(t - 2 * cfg.servo.max_estimate_age_s, T)
+    info = ctrl.step(t, q, dq, old)
+    assert ctrl.phase == "search" and info.T_base_cam_des is None and info.stop_reason == "at the search pose"
+    info = ctrl.step(t, q, dq, _track(t, T))
+    assert ctrl.phase == "servo" and info.T_base_cam_des is not None and ctrl.events[-1][1].startswith("phase servo")
+
+
+def test_search_pose_out_of_the_arms_limits_is_one_line_exit_2(capsys):
+    bad = list(SIM_SEARCH_POSE_DEG)
+    bad[1] = 120.0  # S2 beyond its range
+    for value, says in ((bad, "servo.search_pose_deg' = [14.8, 120"), (bad[:6], "must be [] or 7 joint angles")):
+        assert main(["track", "--sim", "--lockstep", "--duration", "1", "--no-record",
+                     "--set", f"servo.search_pose_deg={value}"]) == 2
+        err = capsys.readouterr().err
+        assert says in err and "Traceback" not in err and len(err.strip().splitlines()) == 1, err
+
+
+def test_creature_leaving_the_view_sends_the_arm_to_the_search_pose_and_is_found_there():
+    """The arm cannot keep up ([servo] max_speed_mm_s = 1): the creature drifts out of view, the
+    arm moves to the search pose (ahead of the drift), the whole volume finds the creature
+    there and servoing resumes; no false track."""
+    cfg = load_config(overrides=[f"servo.search_pose_deg={SIM_SEARCH_POSE_DEG}", "servo.max_speed_mm_s=1.0",
+                                 "sim.camera_fps=10", "servo.settle_s=1.0"])
+    sc = run_lockstep(cfg, 6.0, seed=0)
+    s = sc.summary()
+    phases = [text.split(":")[0] for _, text in sc.phase_events]
+    assert phases == ["phase search", "phase servo"], sc.phase_events
+    t_search, t_servo = sc.phase_events[0][0], sc.phase_events[1][0]
+    assert any(f.status == "out_of_view" and f.in_view < 0.6 for f in sc.truth_frames if f.t <= t_search)
+    assert t_servo - t_search < 2.0 and s["final_status"] == "tracking" and s["false_tracks"] == 0, s
+    assert all(f.status == "tracking" and f.in_view == 1.0 for f in sc.truth_frames if f.t > t_servo + 0.5), s

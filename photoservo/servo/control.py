@@ -39,6 +39,7 @@ class ServoParams:
     collect_speed_mm_s: float  # descent/ascent speed during collection
     tool_dwell_s: float  # how long the tool output stays on at the bottom
     settle_s: float = 5.0  # scores (simulation): the hold error counts from this session time on (s)
+    search_pose_deg: tuple[float, ...] = ()  # joints (deg) to move to when the creature leaves the view; () = hold
 
     def validate(self, where: str) -> None:
         for name in ("hover_mm", "k_position", "k_rotation", "max_speed_mm_s", "max_rotation_deg_s",
@@ -47,6 +48,9 @@ class ServoParams:
                 raise InputError(f"config key '{where}.{name}' must be > 0, got {getattr(self, name)}")
         if not 0.0 <= self.feed_forward <= 1.0:
             raise InputError(f"config key '{where}.feed_forward' must be in 0..1, got {self.feed_forward}")
+        if len(self.search_pose_deg) not in (0, 7):
+            raise InputError(f"config key '{where}.search_pose_deg' must be [] or 7 joint angles (deg), "
+                             f"got {len(self.search_pose_deg)} numbers")
         if self.collect_height_mm >= self.hover_mm:
             raise InputError(f"config key '{where}.collect_height_mm' must be below hover_mm ({self.hover_mm})")
 

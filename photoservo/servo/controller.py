@@ -5,6 +5,12 @@ Collection (`--collect`):
   servo --(hold error within tolerance for hold_time_s)--> descend --(at collect height)-->
   grasp (tool on, dwell) --> ascend --(back at hover)--> done; any loss of the target while
   descending aborts: climb back to hover height (tool off) and servo again.
+
+Search (issue 10, [servo] search_pose_deg set): servo --(the tracker says out_of_view: the
+creature left the view)--> search: a jerk-limited move (Motion.move_step: Ruckig, limits,
+keep-out) to the configured joints, then waiting there while the tracker searches the whole
+volume --(a pose fresh enough to servo on)--> servo. The search pose is configured, never taken
+from an estimate; without it, a creature out of view is waited for where the arm stopped.
 """
 
 from __future__ import annotations
@@ -14,6 +20,7 @@ from typing import Literal, get_args
 
 import numpy as np
 
+from photoservo.errors import InputError
 from photoservo.geometry import pose_error
 from photoservo.robot import pa10
 from photoservo.servo.control import (
@@ -27,7 +34,7 @@ from photoservo.servo.motion import Motion, Setpoint
 from photoservo.vision.rig import Rig
 from photoservo.vision.tracker import Track
 
-Phase = Literal["servo", "descend", "grasp", "ascend", "done", "stopped"]
+Phase = Literal["servo", "descend", "grasp", "ascend", "done", "stopped", "search"]
 PHASES: tuple[str, ...] = get_args(Phase)
 REACH_MM = 1250.0  # distance from the shoulder (S2 axis) beyond which the PA-10 cannot hover
 
@@ -60,6 +67,7 @@ class Controller:
     T_flange_left: np.ndarray
     T_left_centre: np.ndarray
     collect: bool = False
+    search_q: np.ndarray | None = None  # [servo] search_pose_deg (rad), None: hold where stopped
     phase: Phase = "servo"
     height_mm: float = field(default=0.0)
     t_hold_start: float | None = None
@@ -88,6 +96,8 @@ class Controller:
             stop = f"estimate {1e3 * (now - track.t + track.coast_s):.0f} ms old"
         T_des = None
         if not stop:
+            if self.phase == "search":
+                self._enter(now, "servo", f"creature {track.status} again, leaving the search pose")
             T_target = track.T_base_model.copy()
             T_target[:3, 3] += track.velocity_mm_s * (now - track.t)
             if np.linalg.norm(T_target[:3, 3] - np.array([0.0, 0.0, pa10.DH_D_MM[0]])) > REACH_MM:
@@ -110,10 +120,22 @@ class Controller:
             twist = flange_twist(v, w, T_base_cam[:3, 3], T_base_flange[:3, 3])
             dq_target = pa10.dls_step(q, twist, p.damping, k_null=0.5)
             sp = self.motion.velocity_step(q, dq, dq_target)
+        elif self._searching(now, track):
+            sp = self.motion.move_step(q, dq, self.search_q)
+            stop = sp.reason or ("at the search pose" if self.motion.done else "to the search pose")
         else:
             sp = self.motion.stop_step(q, dq, reason=stop)
         return ControlInfo(now, self.phase, sp, T_base_cam, T_des, float(np.linalg.norm(e_p)), yaw,
                            stop or sp.reason, self.tool_on)
+
+    def _searching(self, now: float, track: Track | None) -> bool:
+        """No pose to servo on: go on to the search pose (or start for it when the tracker says
+        the creature left the view, while servoing)?"""
+        if self.search_q is None:
+            return False
+        if self.phase == "servo" and track is not None and track.status == "out_of_view":
+            self._enter(now, "search", "creature out of view, moving to the search pose")
+        return self.phase == "search"
 
     def _update_hold(self, now: float, err_mm: float, yaw_deg: float) -> None:
         p = self.params
@@ -159,6 +181,21 @@ def phase_of(text: str) -> Phase | None:
     head, sep, _ = text.partition(": ")
     name = head.removeprefix("phase ")
     return name if sep and head.startswith("phase ") and name in PHASES else None  # type: ignore[return-value]
+
+
+def search_joints(params: ServoParams, motion: Motion) -> np.ndarray | None:
+    """[servo] search_pose_deg as joints (rad), checked against the joint ranges less
+    joint_margin_deg and the keep-out (`Motion.check_target`): an InputError naming the key
+    otherwise. None when the key is empty (no search pose)."""
+    if not params.search_pose_deg:
+        return None
+    q = np.radians(np.asarray(params.search_pose_deg, dtype=float))
+    try:
+        motion.check_target(q)
+    except InputError as e:
+        shown = ", ".join(f"{v:g}" for v in params.search_pose_deg)
+        raise InputError(f"config key 'servo.search_pose_deg' = [{shown}]: {str(e).removeprefix('target: ')}") from None
+    return q
 
 
 def left_centre(rig: Rig) -> np.ndarray:

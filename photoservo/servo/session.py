@@ -27,7 +27,7 @@ from photoservo.config import Config
 from photoservo.robot import pa10
 from photoservo.robot.arm import Arm, JointHistory
 from photoservo.robot.clock import Rate, ignore_stop_signals, lower_priority, raise_priority, set_realtime, start_child
-from photoservo.servo.controller import Controller, Phase, left_centre
+from photoservo.servo.controller import Controller, Phase, left_centre, search_joints
 from photoservo.servo.motion import Motion
 from photoservo.servo.scores import Scores, Truth
 from photoservo.servo.warm import warm_start
@@ -215,9 +215,11 @@ def log_tick(recorder, tick: Tick, i: int, t0: float = 0.0) -> None:
 
 
 def controller_for(cfg: Config, rig: Rig, collect: bool = False) -> Controller:
-    """The servo controller of a rig with [hand_eye] (the session's, the lockstep run's, replay's)."""
-    return Controller(cfg.servo, Motion(cfg.motion, pa10.load_limits()), rig.T_flange_left(), left_centre(rig),
-                      collect=collect)
+    """The servo controller of a rig with [hand_eye] (the session's, the lockstep run's, replay's);
+    InputError when [servo] search_pose_deg is out of the arm's limits or keep-out."""
+    motion = Motion(cfg.motion, pa10.load_limits())
+    return Controller(cfg.servo, motion, rig.T_flange_left(), left_centre(rig), collect=collect,
+                      search_q=search_joints(cfg.servo, motion))
 
 
 # ----------------------------------------------------------------------------- real time
@@ -433,6 +435,7 @@ def run_realtime(cfg: Config, duration_s: float, *, port: str, read_frame: Calla
     returns then (the simulator starts its cameras and world there), else when it is ready.
     `keep_ids`: processes or threads that must hold their period too (`_ControlProcess.step_back`)."""
     T_fl = rig.T_flange_left()
+    controller_for(cfg, rig, collect)  # its config checked here (exit 2), before the control process starts
     warm_start(model, rig, cfg.fitness, say=say)  # before the arm is enabled (no-op when warmed already)
     tracker = Tracker.from_config(model, rig, cfg, seed=seed)
     sc = Scores(settle_s=cfg.servo.settle_s)

@@ -115,12 +115,13 @@ def run_lockstep(cfg: Config, duration_s: float, *, collect: bool = False, no_mo
     notice of a first run."""
     cfg = sim_config(cfg)
     sim = setup or build_sim(cfg)
+    ctrl = controller_for(cfg, sim.rig, collect)  # its config checked before the arm is enabled
     warm_start(sim.scene.model, sim.rig, cfg.fitness, scene=sim.scene, say=say)
     arm = LockstepArm(cfg.emulator, sim.limits, sim.q0)
     if not no_motion:
         arm.enable()
     sc = Scores(settle_s=cfg.servo.settle_s)
-    c = ControlLoop(controller_for(cfg, sim.rig, collect), None if no_motion else arm, sc, sim.truth)
+    c = ControlLoop(ctrl, None if no_motion else arm, sc, sim.truth)
     tracker = Tracker.from_config(sim.scene.model, sim.rig, cfg, seed=seed, time_budget=False)
     dt = 1.0 / cfg.motion.rate_hz
     k = 0
