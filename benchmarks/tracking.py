@@ -6,10 +6,12 @@ Cases (each `python -m photoservo.cli track --sim --no-record --json ...` in a f
   first run    the same with an empty NUMBA_CACHE_DIR (the warm start compiles before the clock)
   no motion    --no-motion --duration D: the creature drifts out of view of a still arm
   occlusion    --set sim.occlusion_s=[5.0, 7.0]: foam hides the creature for 2 s
+  low_fps      --set sim.camera_fps=3: the vision loop at 3 fps (what a loaded machine leaves it)
 
 Targets (issue 10, "Done when"): first run found >= 90 % and hold <= 15 mm RMS; no motion:
 false_tracks 0 and track_error_mm.p95 <= 15 mm, ending out_of_view; occlusion: every
-reacquisition_s <= 1.0 s and found >= 80 %; >= 30 fps steady on the default run.
+reacquisition_s <= 1.0 s and found >= 80 %; >= 30 fps steady on the default run; low_fps (this
+round's brief): found >= 80 %, false_tracks 0.
 
 The machine is shared (2 cores): the load average before and after each run and the runs' CPU
 seconds are stored with the numbers; `--repeats N` runs each case N times and prints medians.
@@ -41,6 +43,7 @@ CASES = {
     "first_run": [],  # and an empty NUMBA_CACHE_DIR
     "no_motion": ["--no-motion"],
     "occlusion": ["--set", "sim.occlusion_s=[5.0, 7.0]"],
+    "low_fps": ["--set", "sim.camera_fps=3"],
 }
 
 
@@ -102,6 +105,9 @@ def verdicts(case: str, n: dict) -> list[str]:
         r = n["reacquisition_s"] or []
         out += [check("reacquisition", bool(r) and all(x is not None and x <= 1.0 for x in r), f"{r} s (<= 1.0)"),
                 check("found", f >= 80.0, f"{f:.0f} % (>= 80)")]
+    if case == "low_fps":
+        out += [check("found", f >= 80.0, f"{f:.0f} % (>= 80)"),
+                check("false_tracks", n["false_tracks"] == 0, f"{n['false_tracks']} (0)")]
     return out
 
 

@@ -27,13 +27,14 @@ the model is in each image, it lies on known water (`water_gate`) and it is no j
 
 The whole-volume search is `estimator.acquisition` — the acquisition of `photoservo estimate`,
 blobs matched along epipolar lines, islands, twins and refinements, the same answer for the same
-seed — spread over frames: each frame runs `acquire_generations` of its GA generations (a fixed
-count, so a replay runs the same search), on the frame it started on (the creature was seen
-there). When it ends, the candidates that passed detection are filtered, with a track before,
+seed — spread over frames: each frame runs `acquire_generations` of its GA generations, more
+when the frame came later than 1/REFERENCE_FPS after the one before (`_acquire_share`: a count
+set by the frame times, so a replay runs the same search; at 3 fps the spread would only make
+the answer seconds staler), on the frame it started on (the creature was seen there). When it ends, the candidates that passed detection are filtered, with a track before,
 to those of the track's size (alpha within `size_tolerance`), and the one nearest the prediction
 at that frame's time is the measurement; the tracking search restarts around it. When the search
 ended on a newer frame (at 2-5 fps its answer is seconds old) the answer is measured again on
-that frame (`_confirm`: blob pairs near it seeded, the rest of the frame's acquire_generations)
+that frame (`_confirm`: blob pairs near it seeded, the rest of the frame's share)
 and counts only if it passes there; otherwise the track is lost at once.
 
 On known water the tracking search scores only poses that pass the water gates
@@ -68,6 +69,7 @@ from photoservo.vision.seeding import BlobPair
 
 Status = Literal["acquiring", "tracking", "coasting", "lost", "out_of_view"]
 LOCAL_SEARCH_S = 1.0  # lost this long after the last measurement: the whole volume is searched too
+REFERENCE_FPS = 30.0  # the frame rate acquire_generations is a per-frame share at (Hz)
 HEAVE_HORIZON_S = 0.25  # known water: the vertical velocity (heave) is extrapolated this long at most (s)
 
 
@@ -187,6 +189,8 @@ class Tracker:
         self.T_base_left_last: np.ndarray | None = None
         self.acquisitions = 0
         self.threshold = math.inf  # fitness that counts as found: set by each acquisition
+        self.t_frame: float | None = None  # capture time of the frame before (s)
+        self.share = params.acquire_generations  # this frame's share of the whole-volume search
         self.time_budget = time_budget  # False: always run generations_per_frame (deterministic)
 
     @classmethod
@@ -229,6 +233,7 @@ class Tracker:
         of [tracker] generations_per_frame (replay of a real-time run: its recorded counts)."""
         t0 = time.perf_counter()
         self.frames += 1
+        self.share, self.t_frame = self._acquire_share(t), t
         T_left_base = invert_pose(T_base_left := np.asarray(T_base_left, dtype=float))
         T_new_old = None if self.T_base_left_last is None else T_left_base @ self.T_base_left_last
         self.T_base_left_last = T_base_left
@@ -269,13 +274,12 @@ class Tracker:
 
     def _confirm(self, frame: StereoHue, T_base_left: np.ndarray, T_left_base: np.ndarray, t: float, n_acq: int,
                  max_generations: int | None) -> tuple[_Measured | None, Candidate | None, int]:
-        """A whole-volume search spread over frames ends on a frame newer than the one it
-        searched: its answer is stale (at 2-5 fps, seconds old). It is measured again on this
-        frame before the arm may use it: the tracking search around it, its window grown with
-        the answer's age, the target-hue blob pairs near it seeded with its orientation and
-        size, for the rest of this frame's acquire_generations (at least generations_per_frame;
-        not cut by the time budget, like the whole-volume search itself)."""
-        gens = max(self.p.generations_per_frame, self.p.acquire_generations - n_acq) if max_generations is None \
+        """A whole-volume search ended on a frame newer than the one it searched: its answer is
+        stale. Measured again on this frame before the arm may use it: the tracking search around
+        it, window grown with its age, target-hue blob pairs near it seeded with its orientation
+        and size, for the rest of this frame's share (at least generations_per_frame), uncut by
+        the time budget like the whole-volume search itself."""
+        gens = max(self.p.generations_per_frame, self.share - n_acq) if max_generations is None \
             else max_generations
         near, _ = self._pairs(frame, T_left_base, t)
         return self._measure_step(frame, T_base_left, T_left_base, None, t, gens, near, budget=False)
@@ -364,7 +368,7 @@ class Tracker:
     def _acquire_step(self, frame: StereoHue, left_bgr: np.ndarray, right_bgr: np.ndarray,
                       T_base_left: np.ndarray, t: float) -> tuple[_Measured | None, int]:
         """This frame's share of the whole-volume search: starts one on this frame when none
-        runs and runs acquire_generations of its GA generations. Once it ends, its chosen
+        runs and runs this frame's share of its GA generations (`_acquire_share`). Once it ends, its chosen
         candidate (`_choose`) measured on the frame it started on, if it passes the tests.
         Returns (measurement or None, generations run)."""
         if self.acquiring is None:
@@ -375,7 +379,7 @@ class Tracker:
         a = self.acquiring
         n = 0
         try:
-            while n < self.p.acquire_generations:
+            while n < self.share:
                 n += next(a.steps)
         except StopIteration as end:
             self.acquiring = None
@@ -389,6 +393,12 @@ class Tracker:
                 if self._measurement(c, a.T_base_left, a.t, jump=False):
                     return _Measured(c, a.T_base_left @ make_pose(c.R, c.position_mm), a.t, acquired=True), n
         return None, n
+
+    def _acquire_share(self, t: float) -> int:
+        """The whole-volume search's GA generations for a frame captured at t (s): acquire_generations
+        per 1/REFERENCE_FPS since the frame before, at least acquire_generations (module docstring)."""
+        a = self.p.acquire_generations
+        return a if self.t_frame is None else max(a, round(a * (t - self.t_frame) * REFERENCE_FPS))
 
     def _pairs(self, frame: StereoHue, T_left_base: np.ndarray, t: float) -> tuple[list[BlobPair], bool]:
         """The blob pairs near the predicted track (within the grown window plus the creature's
