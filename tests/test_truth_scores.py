@@ -90,14 +90,14 @@ def test_creature_drifting_out_of_a_still_arms_view_is_reported_so():
 def test_tracking_holds_at_3_fps_with_two_generations_a_frame():
     """A loaded machine (issue 10): the vision loop at 3 fps, its 20-ms budget leaving the
     tracking search 2 GA generations a frame. The whole-volume search gets a frame's share for
-    each 1/30 s between frames (it spread over seven, its answer 2 s old), its answer is
-    measured again on the newest frame before it counts, then tracked to the end; never a false
-    track. (Before: found 23 % in these 10 s, 58 % in 20 s, 5 false tracks.)"""
+    each 1/30 s between frames, up to 4 (it spread over seven, its answer 2 s old), its answer
+    is measured again on the newest frame before it counts, then tracked to the end; never a
+    false track. (Before: found 23 % in these 10 s, 58 % in 20 s, 5 false tracks.)"""
     cfg = load_config(overrides=["sim.camera_fps=3", "tracker.generations_per_frame=2", "servo.settle_s=4.0"])
     sc = run_lockstep(cfg, 10.0, seed=0)
     s = sc.summary()
     first = next(i for i, f in enumerate(sc.truth_frames) if f.status == "tracking")
     after = [f.status for f in sc.truth_frames[first:]]
-    assert first <= 2 and after.count("tracking") >= 0.85 * len(after) and s["found_ratio"] >= 0.8, (after, s)
+    assert first <= 3 and after.count("tracking") >= 0.85 * len(after) and s["found_ratio"] >= 0.8, (after, s)
     assert s["false_tracks"] == 0 and s["track_error_mm"]["p95"] <= 45.0, s
     assert sc.truth_frames[first].error_mm <= 20.0, s  # the confirmed answer, not the 2-s-old one

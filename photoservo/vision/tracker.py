@@ -13,7 +13,8 @@ the model is in each image, it lies on known water (`water_gate`) and it is no j
 `max_speed_mm_s`; otherwise the frame is a miss. Status of a frame:
 
   tracking     measured;
-  coasting     a miss, fewer than `lost_frames` in a row: the prediction stands in;
+  coasting     a miss, fewer than `lost_frames` in a row: the prediction stands in (from
+               PAIRS_AFTER_S after the last measurement blob pairs are seeded as when lost);
   lost         `lost_frames` misses in a row while the predicted creature is in view (foam,
                glare): no pose. The search stays around the predicted track first — its size is
                known, so alpha stays within `window_alpha_frac`; the position window grows with
@@ -34,12 +35,11 @@ the answer seconds staler), on the frame it started on (the creature was seen th
 to those of the track's size (alpha within `size_tolerance`), and the one nearest the prediction
 at that frame's time is the measurement; the tracking search restarts around it. When the search
 ended on a newer frame (at 2-5 fps its answer is seconds old) the answer is measured again on
-that frame (`_confirm`: blob pairs near it seeded, the rest of the frame's share)
+that frame (`_confirm`: blob pairs near it seeded, acquire_generations more generations)
 and counts only if it passes there; otherwise the track is lost at once.
 
-On known water the tracking search scores only poses that pass the water gates
-(vision/water_search.py): with a generation or two per frame (a loaded machine) it otherwise
-settles on tilted or sunken poses that score well and are no measurement.
+On known water the tracking search scores only poses that pass the water gates (water_search.py):
+with a generation or two per frame it otherwise settles on tilted or sunken poses, no measurement.
 
 Pure: arrays in, arrays out; time is whatever clock the caller stamps frames with (s).
 """
@@ -69,7 +69,9 @@ from photoservo.vision.seeding import BlobPair
 
 Status = Literal["acquiring", "tracking", "coasting", "lost", "out_of_view"]
 LOCAL_SEARCH_S = 1.0  # lost this long after the last measurement: the whole volume is searched too
-REFERENCE_FPS = 30.0  # the frame rate acquire_generations is a per-frame share at (Hz)
+PAIRS_AFTER_S = 0.5  # the last measurement this old (a loaded machine's long frames): blob pairs seeded
+REFERENCE_FPS = 30.0  # the frame rate acquire_generations is a per-frame share at (Hz)...
+SHARE_MAX = 4  # ...and a later frame's share at most this many times it (longer frames feed on themselves)
 HEAVE_HORIZON_S = 0.25  # known water: the vertical velocity (heave) is extrapolated this long at most (s)
 
 
@@ -242,7 +244,8 @@ class Tracker:
         n = n_acq = 0
         far = False
         if self.search is not None:
-            near, far = self._pairs(frame, T_left_base, t) if self.status == "lost" else ([], False)
+            old = self.status == "lost" or t - self.t_last > PAIRS_AFTER_S
+            near, far = self._pairs(frame, T_left_base, t) if old else ([], False)
             m, best, n = self._measure_step(frame, T_base_left, T_left_base, T_new_old, t, gens, near)
         if m is None and (self.search is None or far or self.acquiring is not None
                           or (self.status == "lost" and t - self.t_last > LOCAL_SEARCH_S)):
@@ -251,7 +254,7 @@ class Tracker:
                 self._accept(acq)
                 self._restart_search(frame, T_left_base @ acq.T_base_model, acq.c.alpha)
                 if acq.t < t:
-                    m, best, n = self._confirm(frame, T_base_left, T_left_base, t, n_acq, max_generations)
+                    m, best, n = self._confirm(frame, T_base_left, T_left_base, t, max_generations)
                     if m is None:  # the creature moved on from where it was found: a track lost already
                         acq, self.misses = None, self.p.lost_frames - 1
         if m is not None:
@@ -272,14 +275,13 @@ class Tracker:
             acquire_generations=n_acq, coast_s=0.0 if self.t_last is None else max(0.0, t - self.t_last),
         )
 
-    def _confirm(self, frame: StereoHue, T_base_left: np.ndarray, T_left_base: np.ndarray, t: float, n_acq: int,
+    def _confirm(self, frame: StereoHue, T_base_left: np.ndarray, T_left_base: np.ndarray, t: float,
                  max_generations: int | None) -> tuple[_Measured | None, Candidate | None, int]:
         """A whole-volume search ended on a frame newer than the one it searched: its answer is
         stale. Measured again on this frame before the arm may use it: the tracking search around
         it, window grown with its age, target-hue blob pairs near it seeded with its orientation
-        and size, for the rest of this frame's share (at least generations_per_frame), uncut by
-        the time budget like the whole-volume search itself."""
-        gens = max(self.p.generations_per_frame, self.share - n_acq) if max_generations is None \
+        and size, acquire_generations (at least generations_per_frame) uncut by the time budget."""
+        gens = max(self.p.generations_per_frame, self.p.acquire_generations) if max_generations is None \
             else max_generations
         near, _ = self._pairs(frame, T_left_base, t)
         return self._measure_step(frame, T_base_left, T_left_base, None, t, gens, near, budget=False)
@@ -309,7 +311,7 @@ class Tracker:
 
     def _plausible(self, p: np.ndarray, t: float) -> bool:
         """A measurement further from the prediction than max_speed allows is a miss."""
-        if self.p_base is None or self.t_last is None:
+        if self.t_last is None:
             return True
         dt = max(t - self.t_last, 1e-3)
         pred = self.p_base + self.v_base * dt
@@ -396,9 +398,9 @@ class Tracker:
 
     def _acquire_share(self, t: float) -> int:
         """The whole-volume search's GA generations for a frame captured at t (s): acquire_generations
-        per 1/REFERENCE_FPS since the frame before, at least acquire_generations (module docstring)."""
+        per 1/REFERENCE_FPS since the frame before, within 1..SHARE_MAX times acquire_generations."""
         a = self.p.acquire_generations
-        return a if self.t_frame is None else max(a, round(a * (t - self.t_frame) * REFERENCE_FPS))
+        return a if self.t_frame is None else min(SHARE_MAX * a, max(a, round(a * (t - self.t_frame) * REFERENCE_FPS)))
 
     def _pairs(self, frame: StereoHue, T_left_base: np.ndarray, t: float) -> tuple[list[BlobPair], bool]:
         """The blob pairs near the predicted track (within the grown window plus the creature's
@@ -422,8 +424,7 @@ class Tracker:
         self.search.seed(R, t, np.array([alpha]))
 
     def _grown(self, dt: float) -> float:
-        """Position half-width of the window dt (s) after the last measurement (mm): it grows
-        as the prediction's uncertainty does, up to search_window_mm."""
+        """Window half-width dt (s) after the last measurement (mm): grows up to search_window_mm."""
         p = self.p
         return min(p.window_position_mm + p.window_growth_mm_s * max(dt, 0.0),
                    max(p.search_window_mm, p.window_position_mm))
@@ -492,8 +493,7 @@ class Tracker:
 
 
 def _in_camera(m: _Measured, T_left_base: np.ndarray) -> Candidate:
-    """A measurement's pose in this frame's left camera (the whole-volume search measured it on
-    an earlier frame)."""
+    """A measurement's pose in this frame's left camera (the whole-volume search's: an earlier frame's)."""
     if not m.acquired:
         return m.c
     T = T_left_base @ m.T_base_model
