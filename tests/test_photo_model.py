@@ -287,3 +287,13 @@ def test_target_touching_the_photo_edge():
     assert len(model.inner_uv) > 100
     pts = model.inner_uv + np.array(model.origin_px)
     assert pts[:, 0].max() <= 199.5 and pts[:, 1].max() <= 119.5
+
+
+@pytest.mark.parametrize("min_s, min_v", [(60, 40), (0, 0), (255, 255), (1, 254)])
+def test_hue_image_is_the_hsv_hue_with_no_hue_below_the_floors_for_every_colour(min_s, min_v):
+    """All 2^24 BGR colours: the hue of cv2's HSV, NO_HUE exactly where S < min_s or V < min_v."""
+    bgr = np.arange(1 << 24, dtype=np.uint32).view(np.uint8).reshape(4096, 4096, 4)[..., :3]
+    bgr = np.ascontiguousarray(bgr)
+    hsv = cv2.cvtColor(bgr, cv2.COLOR_BGR2HSV)
+    want = np.where((hsv[..., 1] < min_s) | (hsv[..., 2] < min_v), NO_HUE, hsv[..., 0])
+    assert np.array_equal(hue_image(bgr, min_s, min_v), want)

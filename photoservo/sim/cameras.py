@@ -14,6 +14,7 @@ import time
 from collections import deque
 from dataclasses import dataclass
 
+import cv2
 import numpy as np
 
 from photoservo.robot import pa10
@@ -38,6 +39,9 @@ def render_process(make_scene, requests, frames) -> None:
     config) and renders each request (T_base_left, t_left, T_base_left_at_right, t_right) — the
     order of `SimScene.render`'s arguments, as the shutter sends them — into a stereo pair."""
     ignore_stop_signals()  # the session stops it
+    # one thread, like a camera's own electronics: OpenCV's worker pool spin-waits between calls
+    # (+10 % CPU per frame here) on the cores the vision loop needs
+    cv2.setNumThreads(1)
     scene: SimScene = make_scene()
     scene.warm()  # compile or load the renderer's kernel before the session's clock starts
     frames.send(("ready",))

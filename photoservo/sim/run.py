@@ -20,6 +20,7 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass
 
+import cv2
 import numpy as np
 
 from photoservo.config import Config
@@ -154,6 +155,8 @@ def run_sim_realtime(cfg: Config, duration_s: float, sim: SimSetup, emulator, **
     started sim.emulator.Emulator, or EmulatorProcess as `track` runs it) has the arm, the
     control process on its pty, the hold scored against the truth. kwargs go to `run_realtime`."""
     cfg = sim_config(cfg)
+    cv_threads = cv2.getNumThreads()
+    cv2.setNumThreads(1)  # the renderer, control and emulator processes share the cores: no spinning OpenCV pool
     cams = SimCameras(SimCamerasConfig(cfg.sim.camera_fps, cfg.sim.lr_skew_s), functools.partial(build_scene, cfg),
                       emulator, sim.rig.T_flange_left())
     cams.connect()
@@ -170,3 +173,4 @@ def run_sim_realtime(cfg: Config, duration_s: float, sim: SimSetup, emulator, **
                             keep_ids=emulator.ids, **kwargs)
     finally:
         cams.disconnect()
+        cv2.setNumThreads(cv_threads)

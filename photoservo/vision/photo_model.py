@@ -68,11 +68,12 @@ class PhotoModel:
 
 
 def hue_image(bgr: np.ndarray, min_saturation: int, min_value: int) -> np.ndarray:
-    """OpenCV hue (0..179) of a BGR image; pixels below the saturation or value floor get NO_HUE."""
+    """OpenCV hue (0..179) of a BGR image; pixels below the saturation or value floor get NO_HUE.
+    Each frame of the tracker passes here (twice): cv2 passes only, no numpy temporaries — the
+    hue OR-ed with the complement of the in-range mask is NO_HUE (255) wherever S or V is short."""
     hsv = cv2.cvtColor(bgr, cv2.COLOR_BGR2HSV)
-    h = hsv[..., 0].copy()
-    h[(hsv[..., 1] < min_saturation) | (hsv[..., 2] < min_value)] = NO_HUE
-    return h
+    hued = cv2.inRange(hsv, (0, int(min_saturation), int(min_value)), (255, 255, 255))
+    return cv2.bitwise_or(cv2.extractChannel(hsv, 0), cv2.bitwise_not(hued))
 
 
 def hue_distance(a: np.ndarray | int, b: np.ndarray | int) -> np.ndarray:
