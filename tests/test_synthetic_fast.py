@@ -4,6 +4,8 @@ its glints, the tiled sensor noise has the configured sigma, and renders are rep
 
 from __future__ import annotations
 
+import dataclasses
+
 import cv2
 import numpy as np
 import pytest
@@ -16,6 +18,7 @@ from photoservo.sim.renderer import (
     Scene,
     StereoRenderer,
     _floater_layer,
+    _lay_floater,
     _world_rays,
     coarse_rays,
     render_view,
@@ -106,16 +109,28 @@ def test_fast_path_is_deterministic_and_its_noise_has_the_configured_sigma():
     assert abs(np.corrcoef(n1[inner].ravel(), n2[inner].ravel())[0, 1]) < 0.05
 
 
-def test_fast_floater_layer_equals_the_exact_one():
-    """Memoised photo prefilter and the sqrt footprint: the same layer up to float rounding."""
+@pytest.mark.parametrize("bend_mm", [0.0, 12.0])
+def test_fast_floater_layer_equals_the_exact_one(bend_mm):
+    """The compiled map and footprint, the memoised photo prefilter: the same layer up to float
+    rounding, flat or bent; laid over an image in one compiled pass as numpy lays it."""
     sc = random_scene(15, CFG.synthetic, PM, kind="crab", effects=())
-    f, T = sc.scene.target, sc.T_world_left
+    f, T = dataclasses.replace(sc.scene.target, bend_mm=bend_mm), sc.T_world_left
     d = _world_rays(StereoRenderer(sc.rig_true).rays_left, T[:3, :3])
     ref = _floater_layer(f, T[:3, 3], d)
-    assert ref[1].max() > 0.99  # the creature is in view
+    assert ref[1].max() > 0.99 and ref[2].mean() > 0.99  # the creature is in view, every ray hits its plane
     for _ in range(2):  # the first call fills the cache, the second reads it
-        col, cov = _floater_layer(f, T[:3, 3], d, fast=True)
+        col, cov, valid = _floater_layer(f, T[:3, 3], d, fast=True)
         assert np.allclose(col, ref[0], atol=1e-3) and np.allclose(cov, ref[1], atol=1e-6)
+        assert np.array_equal(valid, ref[2])
+    rng = np.random.default_rng(2)
+    img = rng.uniform(0, 255, (*d.shape[:2], 3)).astype(np.float32)
+    shade = rng.uniform(0.6, 1.4, d.shape[:2]).astype(np.float32)
+    win = (slice(100, 300), slice(150, 420))
+    layer = tuple(a[win] for a in ref)
+    laid = [img.copy(), img.copy()]
+    for out, fast in zip(laid, (False, True)):
+        _lay_floater(out, win, layer, shade, fast)
+    assert np.abs(laid[0] - laid[1]).max() < 1e-3 and not np.array_equal(laid[0], img)
 
 
 def test_coarse_rays_are_block_centre_rays_and_bad_strides_are_refused():

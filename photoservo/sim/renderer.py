@@ -136,18 +136,13 @@ def pixel_rays(cam: Camera) -> np.ndarray:
     return np.concatenate([xy, np.ones((H, W, 1))], axis=-1)
 
 
-def _footprint(u: np.ndarray, v: np.ndarray, valid: np.ndarray, exact: bool = True) -> float:
-    """Median photo pixels per image pixel over `valid` (from the map's finite differences).
-    exact=False: lengths by sqrt(x² + y²) instead of np.hypot (~5x faster here; may differ in
-    the last bit)."""
+def _footprint(u: np.ndarray, v: np.ndarray, valid: np.ndarray) -> float:
+    """Median photo pixels per image pixel over `valid` (from the map's finite differences; the
+    fast path's is renderer_kernel.footprint_values)."""
     if u.shape[0] < 2 or u.shape[1] < 2:
         return 1.0
-    if exact:
-        du = np.hypot(np.diff(u, axis=1)[:-1], np.diff(v, axis=1)[:-1])
-        dv = np.hypot(np.diff(u, axis=0)[:, :-1], np.diff(v, axis=0)[:, :-1])
-    else:
-        ux, vx, uy, vy = np.diff(u, axis=1)[:-1], np.diff(v, axis=1)[:-1], np.diff(u, axis=0)[:, :-1], np.diff(v, axis=0)[:, :-1]
-        du, dv = np.sqrt(ux * ux + vx * vx), np.sqrt(uy * uy + vy * vy)
+    du = np.hypot(np.diff(u, axis=1)[:-1], np.diff(v, axis=1)[:-1])
+    dv = np.hypot(np.diff(u, axis=0)[:, :-1], np.diff(v, axis=0)[:, :-1])
     m = valid[:-1, :-1] & valid[1:, :-1] & valid[:-1, 1:]
     if not m.any():
         return 1.0
@@ -222,31 +217,16 @@ def _photo_layers_cached(photo: _ByIdentity, mask: _ByIdentity, size: tuple[int,
     return premult, a
 
 
-def _floater_layer(f: Floater, C: np.ndarray, d: np.ndarray, fast: bool = False) -> tuple[np.ndarray, np.ndarray]:
-    """(colour h x w x 3 float32, coverage h x w float32 0..1) of one floater seen from camera
-    centre C (world) along rays d (world, h x w x 3). fast: reuse the prefiltered photo of an
-    earlier frame at the same on-screen size (`_photo_layers_cached`) and the inexact
-    `_footprint` (equal to the exact layer up to float rounding)."""
-    Tm = np.linalg.inv(f.T_world_model)
-    o = Tm[:3, :3] @ C + Tm[:3, 3]
-    dm = d.astype(np.float64) @ Tm[:3, :3].T
-    dz = dm[..., 2]
-    with np.errstate(divide="ignore", invalid="ignore"):
-        s = np.where(np.abs(dz) > 1e-12, -o[2] / dz, np.nan)
-        if f.bend_mm != 0.0:
-            half_w = 0.5 * cv2.boundingRect(f.mask)[2] / f.alpha
-            for _ in range(8):  # fixed point: z(x(s)) on the bent sheet z = -b (x / half_w)^2
-                xm = o[0] + s * dm[..., 0]
-                zt = -f.bend_mm * (xm / half_w) ** 2
-                s = (zt - o[2]) / dz
-    valid = np.isfinite(s) & (s > 0)
-    xm = o[0] + s * dm[..., 0]
-    ym = o[1] + s * dm[..., 1]
-    u = np.where(valid, xm * f.alpha + f.origin_px[0], -1e4)
-    v = np.where(valid, ym * f.alpha + f.origin_px[1], -1e4)
+def _floater_layer(f: Floater, C: np.ndarray, d: np.ndarray, fast: bool = False
+                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(premultiplied colour h x w x 3 float32, coverage h x w float32, valid h x w bool: a hit
+    in front) of one floater seen from camera centre C (world) along rays d (world, h x w x 3):
+    `_lay_floater` lays it over the image. fast: the map from image to photo and its footprint
+    by the compiled kernels (renderer_kernel.py), and the prefiltered photo of an earlier frame
+    at the same on-screen size (`_photo_layers_cached`): equal to the exact layer up to float
+    rounding."""
+    u, v, valid, fp = _photo_map(f, C, d, fast)
     H, W = f.mask.shape
-    near = valid & (u > -2) & (v > -2) & (u < W + 1) & (v < H + 1)
-    fp = _footprint(u, v, near, exact=not fast)
     size = None
     if fp > 1.2:  # prefilter the photo to the on-screen footprint (anti-aliasing)
         k = 1.0 / fp
@@ -258,9 +238,60 @@ def _floater_layer(f: Floater, C: np.ndarray, d: np.ndarray, fast: bool = False)
     mu, mv = u.astype(np.float32), v.astype(np.float32)
     cov = cv2.remap(a, mu, mv, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT, borderValue=0)
     col = cv2.remap(premult, mu, mv, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT, borderValue=0)
+    return col.reshape(*cov.shape, 3), cov, valid
+
+
+def _lay_floater(img: np.ndarray, win: tuple[slice, slice], layer: tuple[np.ndarray, np.ndarray, np.ndarray],
+                 shade: np.ndarray, fast: bool) -> None:
+    """Lay a `_floater_layer` over img[win] (float32 BGR, in place): its coverage (clipped to
+    0..1) over its un-premultiplied colour, shaded by the swell like the water (`shade`, full
+    image). fast: in one compiled pass (renderer_kernel.composite_floater, the same float32
+    arithmetic)."""
+    if fast:
+        from photoservo.sim import renderer_kernel as sk
+
+        sk.composite_floater(img, win[0].start, win[1].start, *layer, shade)
+        return
+    col, cov, valid = layer
     cov = np.where(valid, cov, np.float32(0))
     col = np.where(cov[..., None] > 1e-4, col / np.maximum(cov, np.float32(1e-4))[..., None], np.float32(0))
-    return col.reshape(*cov.shape, 3), np.clip(cov, 0, 1)
+    cov = np.clip(cov, 0, 1)
+    col = col * (0.95 + 0.12 * (shade[win] - 1.0))[..., None]
+    img[win] = img[win] * (1 - cov[..., None]) + col * cov[..., None]
+
+
+def _photo_map(f: Floater, C: np.ndarray, d: np.ndarray, fast: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
+    """(u, v, valid, footprint): the photo pixel (u, v) where each ray d (world, h x w x 3) from
+    camera centre C (world, mm) meets the floater's surface (-1e4 where it does not, in front:
+    valid False), and the median photo px per image px there (`_footprint`). fast: the
+    compiled kernels; else numpy (the reference)."""
+    Tm = np.linalg.inv(f.T_world_model)
+    o = Tm[:3, :3] @ C + Tm[:3, 3]
+    H, W = f.mask.shape
+    half_w = 0.5 * cv2.boundingRect(f.mask)[2] / f.alpha if f.bend_mm != 0.0 else 1.0
+    if fast:
+        from photoservo.sim import renderer_kernel as sk
+
+        u, v = np.empty(d.shape[:2]), np.empty(d.shape[:2])
+        valid, near = np.empty(d.shape[:2], np.bool_), np.empty(d.shape[:2], np.bool_)
+        sk.floater_hits(d, np.ascontiguousarray(Tm[:3, :3]), o, float(f.alpha), float(f.origin_px[0]),
+                        float(f.origin_px[1]), float(W), float(H), float(f.bend_mm), half_w, u, v, valid, near)
+        out = np.empty(max(0, d.shape[0] - 1) * max(0, d.shape[1] - 1))
+        n = sk.footprint_values(u, v, near, out)
+        return u, v, valid, float(np.median(out[:n])) if n else 1.0
+    dm = d.astype(np.float64) @ Tm[:3, :3].T
+    dz = dm[..., 2]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        s = np.where(np.abs(dz) > 1e-12, -o[2] / dz, np.nan)
+        for _ in range(8 if f.bend_mm != 0.0 else 0):  # fixed point: z(x(s)) on the bent sheet z = -b (x / half_w)^2
+            xm = o[0] + s * dm[..., 0]
+            zt = -f.bend_mm * (xm / half_w) ** 2
+            s = (zt - o[2]) / dz
+    valid = np.isfinite(s) & (s > 0)
+    u = np.where(valid, (o[0] + s * dm[..., 0]) * f.alpha + f.origin_px[0], -1e4)
+    v = np.where(valid, (o[1] + s * dm[..., 1]) * f.alpha + f.origin_px[1], -1e4)
+    near = valid & (u > -2) & (v > -2) & (u < W + 1) & (v < H + 1)
+    return u, v, valid, _footprint(u, v, near)
 
 
 def _foam_layer(foam: Foam, P: np.ndarray) -> np.ndarray:
@@ -406,9 +437,7 @@ def render_view(scene: Scene, cam: Camera, T_world_cam: np.ndarray, t: float = 0
         win = _window(cam, T_cam_world, _floater_box(f))
         if win is None:
             continue
-        col, cov = _floater_layer(f, C, _world_rays(rays[win], R) if fast else d[win], fast=fast)
-        col = col * (0.95 + 0.12 * (shade[win] - 1.0))[..., None]  # the swell shades it too
-        img[win] = img[win] * (1 - cov[..., None]) + col * cov[..., None]
+        _lay_floater(img, win, _floater_layer(f, C, _world_rays(rays[win], R) if fast else d[win], fast), shade, fast)
     if scene.foam is not None and len(scene.foam.patches):
         for patch in np.asarray(scene.foam.patches, float).reshape(-1, 3):
             x, y, r = patch

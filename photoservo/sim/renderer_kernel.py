@@ -114,3 +114,67 @@ def shade_water(rays: np.ndarray, R: np.ndarray, C: np.ndarray, waves: np.ndarra
                dx_tex, dy_tex, 20.0 * float(t), mott_tex, float(mottle), np.asarray(sun, np.float64),
                np.asarray(colour, np.float64), np.asarray(sky, np.float64), float(glint), col, shade, P, water, d)
     return col, shade, P, water, d
+
+
+# ----------------------------------------------------------------------------- floaters (fast path)
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def floater_hits(d, Tm, o, alpha, ox, oy, W, H, bend, half_w, u, v, valid, near):
+    """`renderer._floater_layer`'s map from image to photo, fused: for unit world rays d (h,w,3)
+    from a camera at model-frame centre o (mm), their hit on the floater's surface (the model
+    plane z = 0, or with bend != 0 the sheet z = -bend (x / half_w)^2 by 8 fixed-point steps)
+    and the photo pixel there: u, v (px, -1e4 where no hit in front), valid (a hit in front),
+    near (valid and within a pixel of the W x H photo). Tm: world -> model rotation (3x3)."""
+    h, w = valid.shape
+    for i in range(h):
+        for j in range(w):
+            d0, d1, d2 = np.float64(d[i, j, 0]), np.float64(d[i, j, 1]), np.float64(d[i, j, 2])
+            m0 = d0 * Tm[0, 0] + d1 * Tm[0, 1] + d2 * Tm[0, 2]
+            m1 = d0 * Tm[1, 0] + d1 * Tm[1, 1] + d2 * Tm[1, 2]
+            m2 = d0 * Tm[2, 0] + d1 * Tm[2, 1] + d2 * Tm[2, 2]
+            s = -o[2] / m2 if abs(m2) > 1e-12 else np.nan
+            if bend != 0.0:
+                for _ in range(8):
+                    xb = (o[0] + s * m0) / half_w
+                    s = (-bend * (xb * xb) - o[2]) / m2
+            ok = math.isfinite(s) and s > 0
+            uu = (o[0] + s * m0) * alpha + ox if ok else -1e4
+            vv = (o[1] + s * m1) * alpha + oy if ok else -1e4
+            u[i, j] = uu
+            v[i, j] = vv
+            valid[i, j] = ok
+            near[i, j] = ok and uu > -2 and vv > -2 and uu < W + 1 and vv < H + 1
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def footprint_values(u, v, near, out):
+    """max(|d(u,v)/dx|, |d(u,v)/dy|) (photo px per image px, forward differences) at every
+    pixel whose right and lower neighbours are `near` too, into out; returns their count."""
+    h, w = near.shape
+    n = 0
+    for i in range(h - 1):
+        for j in range(w - 1):
+            if near[i, j] and near[i + 1, j] and near[i, j + 1]:
+                ux, vx = u[i, j + 1] - u[i, j], v[i, j + 1] - v[i, j]
+                uy, vy = u[i + 1, j] - u[i, j], v[i + 1, j] - v[i, j]
+                out[n] = max(math.sqrt(ux * ux + vx * vx), math.sqrt(uy * uy + vy * vy))
+                n += 1
+    return n
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def composite_floater(img, r0, c0, col, cov, valid, shade):
+    """Lay a floater's layer over img[r0:, c0:] (float32 BGR): coverage cov (0 where not valid,
+    clipped to 0..1) over the un-premultiplied colour col / cov, shaded by the swell
+    (0.95 + 0.12 (shade - 1)); float32 arithmetic throughout, as the numpy expressions it replaces."""
+    h, w = cov.shape
+    one, eps = np.float32(1.0), np.float32(1e-4)
+    for i in range(h):
+        for j in range(w):
+            c = cov[i, j] if valid[i, j] else np.float32(0.0)
+            k = np.float32(0.95) + np.float32(0.12) * (shade[r0 + i, c0 + j] - one)
+            a = min(max(c, np.float32(0.0)), one)
+            for ch in range(3):
+                x = col[i, j, ch] / max(c, eps) if c > eps else np.float32(0.0)
+                img[r0 + i, c0 + j, ch] = img[r0 + i, c0 + j, ch] * (one - a) + (x * k) * a
