@@ -191,6 +191,7 @@ class Emulator(Bridge):
         self._state_every = max(1, round(p.control_hz / p.state_hz))
         self._rx_pace, self._tx_pace = Pacer(p.baud), Pacer(p.baud)
         self._tx_buf = bytearray()
+        self._tx_full = False  # the last write found the pty full (a host not reading: wait, do not poll)
         self._next_tick = time.monotonic() + self._T
         self._n_tick = 0
         self._frame_len = len(P.encode(self.model.report(), 0))
@@ -277,6 +278,7 @@ class Emulator(Bridge):
                     w = os.write(self._fd, bytes(self._tx_buf[:n]))
                 except BlockingIOError:
                     w = 0
+                self._tx_full = w < n  # the pty holds no more: the host is not reading (yet)
                 self._tx_pace.spend(w)
                 del self._tx_buf[:w]
 
@@ -285,7 +287,7 @@ class Emulator(Bridge):
         line freeing up, whichever comes first."""
         now = time.monotonic()
         timeout = self._next_tick - now
-        if self._tx_buf:
+        if self._tx_buf and not self._tx_full:  # a full pty: select wakes when the host has read some
             timeout = min(timeout, max(self._tx_pace.wait_for(len(self._tx_buf)), 2e-4))
         for q in (self.rx_faults, self.tx_faults):
             r = q.next_release()
@@ -297,4 +299,4 @@ class Emulator(Bridge):
         if silent or rx_throttled:
             time.sleep(min(timeout, 0.005))
         else:
-            select.select([self._fd], [], [], timeout)
+            select.select([self._fd], [self._fd] if self._tx_full and self._tx_buf else [], [], timeout)
