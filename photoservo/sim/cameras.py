@@ -67,6 +67,7 @@ class SimCameras(StereoSource):
         self._proc = None
         self._cond = threading.Condition()
         self._in_flight: deque[float] = deque()
+        self._t_next = 0.0  # monotonic time of the next exposure
         self._stop = False
         self._shutter = threading.Thread(target=self._expose, name="sim-shutter", daemon=True)
 
@@ -95,26 +96,38 @@ class SimCameras(StereoSource):
         self._shutter.start()
 
     def _expose(self) -> None:
-        t_next = time.monotonic()
-        while True:
-            with self._cond:
-                while not self._stop and (self._in_flight or time.monotonic() < t_next):
-                    self._cond.wait(max(0.0, min(0.05, t_next - time.monotonic())) or 0.05)
+        """The shutter: an exposure every camera period while none is in flight (`_grab_pair`
+        exposes the next itself when it takes a pair after its time has come)."""
+        with self._cond:
+            self._t_next = time.monotonic()
+            while True:
+                while not self._stop and (self._in_flight or time.monotonic() < self._t_next):
+                    self._cond.wait(max(0.0, min(0.05, self._t_next - time.monotonic())) or 0.05)
                 if self._stop:
                     return
-                t_l = time.monotonic()
-                T_l = pa10.fk(self.emulator.true_state().q) @ self.T_fl
-                self._in_flight.append(t_l)
-            self._req_tx.send((T_l, t_l - self.t0, T_l, t_l + self.skew - self.t0))
-            t_next = max(t_next + self.period, time.monotonic() - self.period)
+                self._expose_now()
+
+    def _expose_now(self) -> None:
+        """Expose a pair now (with `_cond` held): the time, the left camera where the emulated arm
+        truly is, the request to the renderer process; the next exposure one period later."""
+        t_l = time.monotonic()
+        T_l = pa10.fk(self.emulator.true_state().q) @ self.T_fl
+        self._in_flight.append(t_l)
+        self._req_tx.send((T_l, t_l - self.t0, T_l, t_l + self.skew - self.t0))
+        self._t_next = max(self._t_next + self.period, t_l - self.period)
 
     def _grab_pair(self) -> tuple[np.ndarray, np.ndarray, float, float] | None:
-        """The next rendered pair (left, right, t_left, t_right), or None after the timeout."""
+        """The next rendered pair (left, right, t_left, t_right), or None after the timeout. A
+        loop slower than the camera rate takes each pair after the next exposure is due: this
+        thread exposes it at once (the shutter thread would wait for the interpreter lock while
+        the loop works: the renderer would idle), so the renderer works while the loop does."""
         if not self._frm_rx.poll(self.config.timeout_s):
             return None
         left, right = self._frm_rx.recv()
         with self._cond:
             t_l = self._in_flight.popleft()
+            if not self._stop and self._shutter.is_alive() and time.monotonic() >= self._t_next:
+                self._expose_now()
             self._cond.notify_all()
         return left, right, t_l, t_l + self.skew
 
