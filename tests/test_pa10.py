@@ -272,3 +272,32 @@ def test_pose_error_is_the_twist_that_reaches_the_target():
         R = _exp_twist(w / angle, np.zeros(3), angle)[:3, :3] @ T[:3, :3]  # rotate by w in the BASE frame
         np.testing.assert_allclose(R, T_star[:3, :3], atol=1e-9)
         np.testing.assert_allclose(T[:3, 3] + e[:3], T_star[:3, 3], atol=1e-9)
+
+
+def test_fk_frames_of_a_batch_are_those_of_each_configuration():
+    """The compiled kernel (robot/pa10_kernel.py) on a batch (N, 7) gives each row's frames, and
+    every frame of a row is the product of the DH transforms up to it (Rz · Tz · Tx · Rx written
+    as separate matrices here)."""
+    from photoservo.robot.pa10 import DH_A_MM, DH_ALPHA, DH_D_MM
+
+    def rot(axis, th):
+        c, s = math.cos(th), math.sin(th)
+        T = np.eye(4)
+        i, j = {"x": (1, 2), "z": (0, 1)}[axis]
+        T[i, i], T[i, j], T[j, i], T[j, j] = c, -s, s, c
+        return T
+
+    def trans(axis, v):
+        T = np.eye(4)
+        T["xyz".index(axis), 3] = v
+        return T
+
+    Q = _random_q(np.random.default_rng(7), 40)
+    F = fk_frames(Q)
+    assert F.shape == (40, 8, 4, 4)
+    for q, Fq in zip(Q, F):
+        np.testing.assert_array_equal(fk_frames(q), Fq)
+        T = np.eye(4)
+        for i in range(7):
+            T = T @ rot("z", q[i]) @ trans("z", DH_D_MM[i]) @ trans("x", DH_A_MM[i]) @ rot("x", DH_ALPHA[i])
+            np.testing.assert_allclose(Fq[i + 1], T, atol=1e-9)

@@ -59,7 +59,10 @@ def test_an_empty_compile_cache_is_seen_before_compiling(tmp_path):
     env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path))
     out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True)
     assert out.stdout.split() == ["False", "0"]
-    assert not list(tmp_path.rglob("*.nb[ic]"))  # no index or code file written
+    # no index or code file of the checked kernels written (building the simulator computes the
+    # arm's kinematics, whose kernel robot/pa10_kernel.py is compiled and cached then)
+    written = [p.name for p in tmp_path.rglob("*.nb[ic]")]
+    assert not [n for n in written if n.startswith(("fitness_kernel", "renderer_kernel"))], written
 
 
 def test_warm_fitness_compiles_the_loops_own_signature():

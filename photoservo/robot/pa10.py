@@ -181,29 +181,20 @@ def _q(q) -> np.ndarray:
     return q
 
 
-def _dh_matrices(ct: np.ndarray, st: np.ndarray) -> np.ndarray:
-    """A_i for joint cosines/sines of shape (..., 7): (..., 7, 4, 4), standard DH (module doc)."""
-    A = np.zeros(ct.shape + (4, 4))
-    A[..., 0, 0], A[..., 0, 1], A[..., 0, 2], A[..., 0, 3] = ct, -st * _CA, st * _SA, DH_A_MM * ct
-    A[..., 1, 0], A[..., 1, 1], A[..., 1, 2], A[..., 1, 3] = st, ct * _CA, -ct * _SA, DH_A_MM * st
-    A[..., 2, 1], A[..., 2, 2], A[..., 2, 3] = _SA, _CA, DH_D_MM
-    A[..., 3, 3] = 1.0
-    return A
-
-
 def fk_frames(q) -> np.ndarray:
     """All link frames in the base frame, (8, 4, 4): [0] the base (identity), [i] = A_1 ... A_i,
     [7] the flange. Frame i-1's z axis is joint i's axis. Used to draw the arm and by `jacobian`.
-    A batch of configurations (N, 7) gives (N, 8, 4, 4)."""
+    A batch of configurations (N, 7) gives (N, 8, 4, 4). Computed by the compiled kernel
+    (pa10_kernel.py)."""
+    from photoservo.robot.pa10_kernel import fk_frames_kernel
+
     q = np.asarray(q, dtype=float)
     if q.shape[-1:] != (N_JOINTS,) or q.ndim > 2:
         raise ValueError(f"expected {N_JOINTS} joint angles (or N x {N_JOINTS}), got shape {q.shape}")
-    A = _dh_matrices(np.cos(q), np.sin(q))
-    frames = np.empty(q.shape[:-1] + (N_JOINTS + 1, 4, 4))
-    frames[..., 0, :, :] = np.eye(4)
-    for i in range(N_JOINTS):
-        frames[..., i + 1, :, :] = frames[..., i, :, :] @ A[..., i, :, :]
-    return frames
+    Q = np.ascontiguousarray(q.reshape(-1, N_JOINTS))
+    frames = np.empty((len(Q), N_JOINTS + 1, 4, 4))
+    fk_frames_kernel(Q, DH_A_MM, DH_D_MM, _CA, _SA, frames)
+    return frames.reshape(q.shape[:-1] + (N_JOINTS + 1, 4, 4))
 
 
 def fk(q, T_flange_tool: np.ndarray | None = None) -> np.ndarray:

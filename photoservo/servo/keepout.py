@@ -31,13 +31,14 @@ from collections.abc import Callable
 
 import numpy as np
 
-from photoservo.robot.pa10 import DH_D_MM, fk_frames, link_capsules
+from photoservo.robot.pa10 import CAPSULE_ENDS, DH_D_MM, fk_frames
 from photoservo.servo.braking import stopping_speed
 
 #: `Keepout.features`' rows: the moving capsule ends, the rig box corners, the tool point (last,
 #: as servo/motion.py's tool-speed cap reads it)
 FEATURES = ("elbow", "wrist", "flange", *(f"camera rig box corner {i + 1}" for i in range(8)), "tool")
 _MOVED_BY = np.array([3, 5, 7, *(7,) * 8, 7])  # joints 1..n move each feature
+_MOVING_ENDS = np.array(CAPSULE_ENDS[1:])  # fk_frames indices of the elbow, wrist and flange capsule ends
 MIN_STEP_S = 1e-4  # shortest interval the continuous check halves down to (s)
 
 
@@ -73,11 +74,14 @@ class Keepout:
     def features(self, Q: np.ndarray) -> np.ndarray:
         """Feature points (N, 12, 3) (mm, base frame) at configurations Q (N, 7), as FEATURES:
         the moving capsule ends (elbow, wrist, flange), the 8 rig box corners, the tool point."""
-        F = fk_frames(np.atleast_2d(Q))
-        ends = link_capsules(F)[:, 1:]  # (N, 3, 3): the shoulder end is fixed
-        flange = F[:, -1]
-        tool = (flange @ self.tool_h)[:, None, :3]
-        corners = np.einsum("nij,kj->nki", flange, self.corners_h)[..., :3]
+        return self.points(fk_frames(np.atleast_2d(Q)))
+
+    def points(self, F: np.ndarray) -> np.ndarray:
+        """`features` from the link frames F (N, 8, 4, 4) of `fk_frames`."""
+        ends = F[:, _MOVING_ENDS][..., :3, 3]  # (N, 3, 3): link_capsules less the fixed shoulder end
+        flange = F[:, -1, :3]  # (N, 3, 4)
+        tool = (flange @ self.tool_h)[:, None, :]
+        corners = (flange @ self.corners_h.T).transpose(0, 2, 1)  # (N, 8, 3)
         return np.concatenate([ends, corners, tool], axis=1)
 
     def point_jacobians(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -85,7 +89,7 @@ class Keepout:
         at q (7,): J_v,i = z_{i-1} x (p - o_{i-1}) for the joints that move the point."""
         F = fk_frames(q)
         z, o = F[:-1, :3, 2], F[:-1, :3, 3]
-        P = self.features(q)[0]
+        P = self.points(F[None])[0]
         r = P[:, None, :] - o[None, :, :]  # (K, 7, 3)
         J = np.stack([z[:, 1] * r[..., 2] - z[:, 2] * r[..., 1],
                       z[:, 2] * r[..., 0] - z[:, 0] * r[..., 2],
@@ -96,7 +100,10 @@ class Keepout:
     def clearance(self, Q: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Per configuration of Q (N, 7): the least clearance (N,) (mm), the feature index and
         the boundary index (0-2 lower x/y/z faces — z is the water — 3-5 upper faces)."""
-        P = self.features(Q)
+        return self.clearance_of(self.features(Q))
+
+    def clearance_of(self, P: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """`clearance` from the feature points P (N, K, 3) (mm, base frame) of `features`."""
         d = np.concatenate([P - self.lo, self.hi - P], axis=2) - self.radius[None, :, None]  # (N, K, 6)
         flat = d.reshape(len(d), -1)
         i = np.argmin(flat, axis=1)

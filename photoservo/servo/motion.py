@@ -317,7 +317,7 @@ class Motion:
         if result not in (Result.Working, Result.Finished):
             sp = self.stop_step(q_meas, dq_meas, reason=f"Ruckig refused the velocity target ({result})")
         else:
-            sp = self._accept(q_meas, dq_meas, self._from_out(), reasons)
+            sp = self._accept(q_meas, dq_meas, self._from_out(), reasons, P)
         self.done = False
         return sp
 
@@ -459,9 +459,11 @@ class Motion:
     def _tool_speed(self, q: np.ndarray, dq: np.ndarray) -> float:
         return float(np.linalg.norm(jacobian(q, self.T_flange_tool)[:3] @ dq))
 
-    def _accept(self, q_meas: np.ndarray, dq_meas: np.ndarray, sp: Setpoint, reasons: list[str]) -> Setpoint:
+    def _accept(self, q_meas: np.ndarray, dq_meas: np.ndarray, sp: Setpoint, reasons: list[str],
+                P_meas: np.ndarray | None = None) -> Setpoint:
         """Braking check (safety layer 4): keep `sp` only if a controlled stop from it stays in
-        the ranges (less half the margin) and the keep-out; else stop from the measured state."""
+        the ranges (less half the margin) and the keep-out; else stop from the measured state.
+        P_meas: the keep-out's feature points at q_meas (K, 3) mm, when the caller has them."""
         inp = self._brake_inp
         inp.current_position, inp.current_velocity, inp.current_acceleration = sp.q, sp.dq, sp.ddq
         try:
@@ -481,18 +483,21 @@ class Motion:
             names = ", ".join(np.array(JOINT_NAMES)[bad])
             return self.stop_step(q_meas, dq_meas, reason=f"braking check: joint range ({names})")
         travel = np.maximum(np.abs(hi - q_meas), np.abs(lo - q_meas))  # from the step's start
-        why = self._keepout_on_brake(q_meas, sp, travel)
+        why = self._keepout_on_brake(q_meas, sp, travel, P_meas)
         if why:
             return self.stop_step(q_meas, dq_meas, reason=f"braking check: {why}")
         out = Setpoint(sp.q, sp.dq, sp.ddq, "; ".join(dict.fromkeys(reasons)))
         self._emit(out)
         return out
 
-    def _keepout_on_brake(self, q_start: np.ndarray, sp: Setpoint, dq_travel: np.ndarray) -> str:
+    def _keepout_on_brake(self, q_start: np.ndarray, sp: Setpoint, dq_travel: np.ndarray,
+                          P_start: np.ndarray | None = None) -> str:
         """Keep-out along the braking trajectory in self._traj, from sp: checked when the volumes
-        at q_start are nearer a boundary than the step and stop could move them (|dq_j| x the
-        reach beyond joint j), then continuously with joint speeds <= |dq| + ddq²/(2·jerk)."""
-        c0 = float(self.keepout.clearance(q_start[None])[0][0])
+        at q_start (feature points P_start (K, 3) mm if known) are nearer a boundary than the step
+        and stop could move them (|dq_j| x the reach beyond joint j), then continuously with joint
+        speeds <= |dq| + ddq²/(2·jerk)."""
+        P = self.keepout.features(q_start) if P_start is None else P_start[None]
+        c0 = float(self.keepout.clearance_of(P)[0][0])
         if c0 > float(dq_travel @ self.keepout.reach_mm) + 1e-6:
             return ""
         v = np.abs(sp.dq) + sp.ddq**2 / (2.0 * self.limits.dddq_max) + 1e-9

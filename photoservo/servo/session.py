@@ -30,7 +30,7 @@ from photoservo.robot.clock import Rate, ignore_stop_signals, lower_priority, ra
 from photoservo.servo.controller import Controller, Phase, left_centre, search_joints
 from photoservo.servo.motion import Motion
 from photoservo.servo.scores import Scores, Truth
-from photoservo.servo.warm import warm_start
+from photoservo.servo.warm import warm_kinematics, warm_start
 from photoservo.vision.fitness import StereoHue, project_model, stereo_hue
 from photoservo.vision.rig import Rig
 from photoservo.vision.sources import StereoFrame
@@ -260,6 +260,7 @@ def control_process(job: ControlJob, conn, stop) -> None:
     # Ctrl-C (and SIGTERM, SIGHUP) may reach the whole process group: the vision process handles
     # it and sets `stop`, so this loop ends in order (controlled stop, servo off)
     ignore_stop_signals()
+    warm_kinematics()  # loaded from numba's cache (the session's warm start compiled it) before the first period
     cfg = job.cfg
     c = ControlLoop(controller_for(cfg, job.rig, job.collect), None, Scores(settle_s=cfg.servo.settle_s), job.truth, job.t0)
     realtime = False
@@ -301,6 +302,11 @@ def control_process(job: ControlJob, conn, stop) -> None:
                     c.scores.time("control_ms", 1e3 * (time.monotonic() - now))
                     c.scores.time("control_late", 1e3 * rate.sleep())
             finally:
+                if batch:  # the last periods' states and events (fewer than a batch); never before the stop
+                    try:
+                        conn.send(_batch(batch, link.quality()))
+                    except (OSError, ValueError):
+                        pass
                 if not job.no_motion:
                     controlled_stop(link, c.scores)
     except Exception as e:  # noqa: BLE001 - a fault while moving: the arm is stopped, then reported
