@@ -136,3 +136,38 @@ def test_silhouette_peak_finds_the_shape_inside_a_larger_region_of_its_hue():
     assert min(psi, np.pi - psi) < np.radians(16)
     assert score > 0.6  # a perfect fit scores 1 (a little less on the shrunk image)
     assert all(not (250 < p[0] < 450 and 30 < p[1] < 150) or p[4] < 0.5 * score for p in peaks)
+
+
+def test_target_hue_scattered_over_water_is_not_a_blob():
+    """Water whose hue lies at the edge of the target's tolerance, under sensor noise, holds
+    target-hue pixels everywhere (~30 %); they must not join the creature into one blob the size
+    of the image (harbour scenes 1000, 1001, 1004: no seed, "not found")."""
+    from photoservo.vision.seeding import target_blobs
+
+    rng = np.random.default_rng(5)
+    hue = np.where(rng.random((240, 320)) < 0.3, 20, 27).astype(np.uint8)  # water: 30 % at hue 20
+    yy, xx = np.mgrid[:240, :320]
+    body = ((xx - 150) / 50.0) ** 2 + ((yy - 120) / 25.0) ** 2 <= 1.0
+    hue[body] = 8
+    hue[118:122, 195:235] = 8  # a thin leg (4 px) off the body
+    target = np.zeros(180, bool)
+    target[:24] = True  # the creature's hues 0..13 widened by the tolerance: 20 is one, 27 is not
+    blobs = target_blobs(hue, target, 30)
+    assert blobs, "no blob"
+    b = blobs[0]
+    assert 0.95 * body.sum() <= b.area <= 1.25 * (body.sum() + 160)
+    assert np.hypot(*(b.centroid - [155, 120])) < 6
+
+
+def test_creature_on_water_at_its_hue_edge_is_found():
+    """Harbour scene 1004 (crab, foam band, olive water at the edge of the crab's hue tolerance):
+    found within 3 % of its distance, the size within 5 %."""
+    from photoservo.sim import harbour
+
+    sc = harbour.random_scene(1004, CFG.synthetic, CFG.photo_model, kind="crab", foam_split=True)
+    model = build_photo_model(sc.photo, CFG.photo_model)
+    est = estimate(model, sc.left, sc.right, sc.rig, CFG.ga, CFG.estimator, CFG.fitness, seed=4)
+    t = np.array(sc.truth["position_mm"])
+    assert est.found
+    assert np.linalg.norm(est.position_mm - t) < 0.03 * t[2]
+    assert abs(sc.truth["alpha_px_per_mm"] / est.alpha_px_per_mm - 1) < 0.05

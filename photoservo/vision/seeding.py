@@ -72,14 +72,28 @@ def union(blobs: list[Blob]) -> Blob:
     return _shape(cc, A, mu20, mu02, mu11)
 
 
+def target_mask(hue: np.ndarray, target_hues: np.ndarray, dense_px: int = 7) -> np.ndarray:
+    """The target-hue pixels of a hue image that belong to a region of target hue (uint8, 255):
+    those whose `dense_px` square neighbourhood is at least half target hue. Water whose hue lies
+    at the edge of the target's tolerance, under sensor noise, holds target-hue pixels scattered
+    everywhere (a third of them, say); closed and merged, they would join the creature into one
+    blob the size of the image. A creature is dense (a leg or an arm at least half `dense_px`
+    wide stays)."""
+    lut = np.zeros(256, np.float32)
+    lut[:HUE_BINS] = np.asarray(target_hues, bool)
+    on = lut[hue]
+    dense = cv2.boxFilter(on, -1, (dense_px, dense_px)) >= 0.5
+    return ((on > 0) & dense).astype(np.uint8) * 255
+
+
 def target_blobs(hue: np.ndarray, target_hues: np.ndarray, min_px: int, max_blobs: int = 12,
                  merge_px: int = 9) -> list[Blob]:
-    """Blobs of the model's target hues in a hue image (largest first). Pieces closer than about
+    """Blobs of the model's target hues in a hue image (largest first): regions of target hue
+    (`target_mask`; pixels scattered in the water do not count). Pieces closer than about
     `merge_px` (a creature cut up by foam, glints or its own markings) count as one blob; its
     area and moments are those of the target-hue pixels only."""
-    lut = np.zeros(256, np.uint8)
-    lut[:HUE_BINS] = np.asarray(target_hues, bool) * 255
-    mask = cv2.morphologyEx(lut[hue], cv2.MORPH_CLOSE, cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (5, 5)))
+    mask = cv2.morphologyEx(target_mask(hue, target_hues), cv2.MORPH_CLOSE,
+                            cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (5, 5)))
     grouped = cv2.dilate(mask, cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (merge_px, merge_px)))
     _, labels, stats, _ = cv2.connectedComponentsWithStats(grouped, connectivity=8)
     labels[mask == 0] = 0
