@@ -159,6 +159,26 @@ def test_target_hue_scattered_over_water_is_not_a_blob():
     assert np.hypot(*(b.centroid - [155, 120])) < 6
 
 
+def test_thin_parts_on_clean_water_keep_their_pixels():
+    """On water without scattered target hue every target-hue pixel seeds, as before the speckle
+    test: a 2-px arm (which no 7 x 7 neighbourhood holds half of) keeps its part of the blob's
+    area and moments (the blob's scale seeds the GA's window; the tracker's acquisition too)."""
+    from photoservo.vision.seeding import target_blobs, target_mask
+
+    hue = np.full((240, 320), 27, np.uint8)
+    yy, xx = np.mgrid[:240, :320]
+    body = ((xx - 150) / 50.0) ** 2 + ((yy - 120) / 25.0) ** 2 <= 1.0
+    hue[body] = 8
+    hue[119:121, 195:245] = 8  # a thin arm (2 px) off the body
+    hue[30, 30] = 8  # one stray pixel far away
+    target = np.zeros(180, bool)
+    target[:24] = True
+    assert np.count_nonzero(target_mask(hue, target)) == np.count_nonzero(hue == 8)
+    b = target_blobs(hue, target, 30)[0]
+    creature = np.count_nonzero(hue[:, 60:] == 8)  # body + arm (the close may fill a corner or two)
+    assert creature <= b.area <= creature + 10
+
+
 def test_creature_on_water_at_its_hue_edge_is_found():
     """Harbour scene 1004 (crab, foam band, olive water at the edge of the crab's hue tolerance):
     found within 3 % of its distance, the size within 5 %."""

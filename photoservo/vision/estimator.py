@@ -63,7 +63,7 @@ class EstimatorParams:
     window_depth: float  # seeded window: inverse depth +- this fraction
     window_scale: float  # seeded window: ln s +- this
     window_grow: float  # seeded window: ln s reaches this far above the blob's (the blob may be a piece)
-    layout_share: float  # seed from the hue layout when regions of target hue hold more than this share of hued px
+    layout_share: float  # seed from the hue layout when seeding.target_mask holds more than this share of hued px
     group_reach: float  # blob pairs group when their gap is <= this x the sum of their half-lengths
     plane_refine: bool  # correct the tilt by a stereo plane fit over the inner points (vision/stereo_plane.py)
     plane_fitness_tol: float  # ...accepted when the re-fitted pose's fitness is at most this below the GA's
@@ -163,9 +163,9 @@ def _islands(model: PhotoModel, rig: Rig, frame: StereoHue, ga_params: GAParams,
         shape = ModelShape.of(model)
         hued = int(np.count_nonzero(frame.left < HUE_BINS))
         if hued and np.count_nonzero(target_mask(frame.left, model.target_hues)) > p.layout_share * hued:
-            # the creature's hues are everywhere in regions (a many-hued creature, the water's hue
-            # among its own; not target hues scattered by noise over water at the edge of the
-            # tolerance): seed from where the photo's hue layout agrees (vision/hue_layout.py)
+            # the creature's hues are everywhere (a many-hued creature, the water's hue among its
+            # own; not target hues scattered by noise over water at the edge of the tolerance,
+            # which target_mask leaves out): seed from where the photo's hue layout agrees (vision/hue_layout.py)
             # and from where the photo's silhouette fits the hues the creature holds more of
             # than the frame does (vision/silhouette.py), alternately
             both = (silhouette_pairs(frame.left, frame.right, model, rig, p),
