@@ -108,6 +108,25 @@ def test_gene_space_encode_decode_roundtrip(scene):
         assert valid[0] and np.allclose(R2[0], R) and np.allclose(t2[0], t) and a2[0] == pytest.approx(alpha)
 
 
+def test_compiled_decode_equals_the_numpy_reference(scene):
+    """`GeneSpace.decode` (genes_kernel) gives the poses and the validity of `decode_reference`
+    for genes inside, at the edge of and outside the search volume, tilts clamped or not."""
+    sc, model = scene
+    rng = np.random.default_rng(5)
+    for kind in ("image", "cartesian"):
+        space = GeneSpace(kind, sc.rig, model, CFG.estimator)
+        box = space.full_region()
+        lo, hi = box.lo - 0.3 * box.width, box.hi + 0.3 * box.width  # a share of them outside the volume
+        for tilt_scale in (0.5, 3.0):  # no tilt clamped / some clamped
+            g = lo + (hi - lo) * rng.random((400, 7))
+            g[:, 4:6] *= tilt_scale
+            R, t, a, valid = space.decode(g)
+            R0, t0, a0, valid0 = space.decode_reference(g)
+            assert np.array_equal(valid, valid0) and 0 < valid.sum() < len(g)
+            assert np.allclose(R, R0, rtol=0, atol=1e-14) and np.allclose(t, t0, rtol=1e-14, atol=0)
+            assert np.allclose(a, a0, rtol=1e-14, atol=0)
+
+
 def test_reflected_rotation_mirrors_the_normal_about_the_line_of_sight():
     R = rotation_from_heading_tilt(0.3, 0.25, -0.1)
     t = np.array([50.0, -30.0, 800.0])

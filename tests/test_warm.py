@@ -75,4 +75,4 @@ def test_warm_fitness_compiles_the_loops_own_signature():
     R = np.eye(3)[None].repeat(5, 0)
     t = np.tile([0.0, 0.0, 600.0], (5, 1))
     fitness(R, t, np.full(5, 2.0), sim.scene.model, stereo_hue(left, right, cfg.fitness), sim.rig, cfg.fitness)
-    assert [len(k.signatures) for k in fitness_kernels(cfg.fitness)] == [1, 1]
+    assert [len(k.signatures) for k in fitness_kernels(cfg.fitness)] == [1, 1, 1]

@@ -31,6 +31,7 @@ Tracking API (`PoseSearch`): `set_frame` for a new frame, `set_window` around a 
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 from collections.abc import Generator
 from dataclasses import dataclass
@@ -80,7 +81,32 @@ class GeneSpace:
         """Genes (P, 7) -> (R (P,3,3), t (P,3) mm, alpha (P,) px/mm, valid (P,) bool).
         Tilt beyond tilt_max is clamped onto it; `valid` is False outside the search volume:
         depth or alpha out of range, model origin outside either image (pinhole), apparent size
-        below min_apparent_px. (Called once per generation: kept to few numpy operations.)"""
+        below min_apparent_px. Compiled (`genes_kernel.decode_genes`: the tracker decodes its
+        population a few times a generation); `decode_reference` is the numpy version."""
+        from photoservo.vision.genes_kernel import decode_genes
+
+        g = np.ascontiguousarray(g, dtype=np.float64)
+        if g.ndim == 1:
+            g = g[None]
+        P = len(g)
+        R, t, alpha, valid = np.empty((P, 3, 3)), np.empty((P, 3)), np.empty(P), np.empty(P, np.bool_)
+        decode_genes(g, self.kind == "image", math.radians(self.params.tilt_max_deg), *self._decode_constants,
+                     R, t, alpha, valid)
+        return R, t, alpha, valid
+
+    @functools.cached_property
+    def _decode_constants(self) -> tuple[np.ndarray, float, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """`decode_genes`'s rig and volume arguments: K, fx, limits, rig R and T, cams."""
+        p, rig = self.params, self.rig
+        limits = np.array([p.z_min_mm, p.z_max_mm, p.alpha_min, p.alpha_max,
+                           self.fx * max(self.model.size_px) / p.min_apparent_px])
+        cams = np.array([[c.K[0, 0], c.K[1, 1], c.K[0, 2], c.K[1, 2], c.width, c.height]
+                         for c in (rig.left, rig.right)], dtype=np.float64)
+        return (np.ascontiguousarray(rig.left.K, np.float64), self.fx, limits,
+                np.ascontiguousarray(rig.R, np.float64), np.ascontiguousarray(rig.T, np.float64).reshape(3), cams)
+
+    def decode_reference(self, g: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """`decode` in numpy (the reference the compiled kernel is tested against)."""
         g = np.asarray(g, dtype=np.float64)
         if g.ndim == 1:
             g = g[None]

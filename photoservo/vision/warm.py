@@ -43,13 +43,16 @@ def kernels_cached(kernels: list) -> bool:
 
 
 def fitness_kernels(params: FitnessParams) -> list:
-    """The dispatchers `fitness` calls from Python with these params (empty for the numpy
-    reference): the counting kernel (serial or parallel) and `combine`."""
+    """The dispatchers a GA's fitness evaluation calls from Python with these params: the
+    counting kernel (serial or parallel) and `combine` (none for the numpy reference), and the
+    genes' decoding into poses (`genes_kernel.decode_genes`, always compiled)."""
+    from photoservo.vision.genes_kernel import decode_genes
+
     if params.kernel == "numpy":
-        return []
+        return [decode_genes]
     from photoservo.vision import fitness_kernel as fk
 
-    return [fk.counts_parallel if params.kernel == "numba-parallel" else fk.counts_serial, fk.combine]
+    return [fk.counts_parallel if params.kernel == "numba-parallel" else fk.counts_serial, fk.combine, decode_genes]
 
 
 def warm_fitness(model: PhotoModel, rig: Rig, params: FitnessParams) -> float:
@@ -60,4 +63,16 @@ def warm_fitness(model: PhotoModel, rig: Rig, params: FitnessParams) -> float:
     frame = StereoHue(left=np.full((rig.left.height, rig.left.width), NO_HUE, np.uint8),
                       right=np.full((rig.right.height, rig.right.width), NO_HUE, np.uint8))
     fitness(np.eye(3)[None], np.array([[0.0, 0.0, 500.0]]), np.array([1.0]), model, frame, rig, params)
+    _warm_decode(rig)
     return time.perf_counter() - t0
+
+
+def _warm_decode(rig: Rig) -> None:
+    """One `decode_genes` call with `GeneSpace.decode`'s argument types (one individual)."""
+    from photoservo.vision.genes_kernel import decode_genes
+
+    g = np.array([[rig.left.K[0, 2], rig.left.K[1, 2], 2.0, 0.0, 0.0, 0.0, 0.0]])
+    decode_genes(g, True, 1.0, np.ascontiguousarray(rig.left.K, np.float64), float(rig.left.K[0, 0]),
+                 np.array([200.0, 3000.0, 0.05, 20.0, 1e6]), np.ascontiguousarray(rig.R, np.float64),
+                 np.ascontiguousarray(rig.T, np.float64).reshape(3), np.zeros((2, 6)),
+                 np.empty((1, 3, 3)), np.empty((1, 3)), np.empty(1), np.empty(1, np.bool_))
