@@ -158,7 +158,7 @@ def run_sim_realtime(cfg: Config, duration_s: float, sim: SimSetup, emulator, **
     cv_threads = cv2.getNumThreads()
     cv2.setNumThreads(1)  # the renderer, control and emulator processes share the cores: no spinning OpenCV pool
     cams = SimCameras(SimCamerasConfig(cfg.sim.camera_fps, cfg.sim.lr_skew_s), functools.partial(build_scene, cfg),
-                      emulator, sim.rig.T_flange_left())
+                      emulator, sim.rig.T_flange_left(), (sim.rig.left.size, sim.rig.right.size))
     cams.connect()
     try:  # the kernels compile (first run) or load here and in the renderer process at once
         warm_start(sim.scene.model, sim.rig, cfg.fitness, scene=sim.scene, render_here=False, say=kwargs.get("say"))
