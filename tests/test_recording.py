@@ -489,6 +489,35 @@ def test_projected_points_and_desired_pose_are_drawn(tmp_path: Path):
     assert np.array_equal(e.size_mm, model.size_mm(alpha))
 
 
+def test_pictures_are_drawn_at_the_video_rate_and_numbers_every_frame(tmp_path: Path):
+    """Compact mode with a 10 Hz video, frames at 30 Hz: the rig pose, the pose boxes and the
+    projected points of every third frame (the first of each 0.1 s, those of the video); the
+    estimates and the truth of every frame."""
+    from rerun.chunk import RrdReader
+
+    from photoservo.vision.fitness import project_model
+    model, rig = small_model(), default_rig()
+    R, p, alpha = np.eye(3), np.array([0.0, 0.0, 400.0]), 4.0
+    proj = project_model(R, p, alpha, model, rig)
+    path = tmp_path / "rate.rrd"
+    with Recorder.open(path, "track", video="none", video_fps=10.0) as rec:
+        rec.log_static_setup(dump_rig(rig), frame_pair(0)[0], model, CONFIG_TOML, seed=1)
+        for k in range(9):
+            t = k / 30 + 0.001
+            rec.log_frame(k, t, *frame_pair(k), T_base_left=np.eye(4))
+            rec.log_estimate(k, t, found=True, fitness=0.7, R=R, position_mm=p, alpha=alpha,
+                             size_mm=model.size_mm(alpha), T_base_left=np.eye(4), projection=proj)
+            rec.log_truth(k, t, make_pose(R, p), model.size_mm(alpha))
+    frames: dict[str, list[int]] = {}
+    for c in RrdReader(path).stream():
+        if not c.is_static and "frame" in c.to_record_batch().schema.names:
+            frames.setdefault(c.entity_path, []).extend(c.to_record_batch().column("frame").to_pylist())
+    for entity in ("/world/rig", "/world/target/estimate", "/world/target/truth", "/world/rig/left/model/inner"):
+        assert sorted(frames[entity]) == [0, 3, 6], entity
+    assert [e.frame for e in read_recording(path).estimates] == list(range(9))
+    assert len(read_recording(path).truth) == 9
+
+
 def test_recording_config_section(tmp_path: Path):
     from photoservo.config import load_config
     cfg = load_config(overrides=[f"recording.dir='{tmp_path}'", "recording.video='h264'"]).recording

@@ -50,8 +50,10 @@ class Drawing:
     its lock and stream). `queue_scalar` and `queue_arm` only queue (no rerun call, no lock),
     so a control thread may call them."""
 
-    def __init__(self, rec: Any) -> None:
+    def __init__(self, rec: Any, rate_hz: float = 0.0) -> None:
         self.rec = rec
+        self.rate_hz = rate_hz                # per-frame drawings at most this often (0 = every frame)
+        self.drawn: tuple[int, int] = (-1, -1)   # (1/rate_hz slot, frame) drawn last
         self.series: deque[tuple] = deque()   # (entity, t, frame, values) not yet written
         self.flushed_t = -math.inf
         self.arm_last: tuple[float, np.ndarray] | None = None
@@ -87,10 +89,26 @@ class Drawing:
 
     # --- per frame -------------------------------------------------------------------------
 
+    def due(self, frame: int, t: float) -> bool:
+        """Whether frame `frame` at loop time t (s) gets its pictures (the rig's pose, the pose
+        boxes, the projected points): every frame when rate_hz is 0, else the first frame of
+        each 1/rate_hz slot, like the watch-only video they are drawn over (its frames and these
+        pictures then match; the numbers, in data/ and plots/, are logged every frame)."""
+        if self.rate_hz <= 0 or frame == self.drawn[1]:
+            return True
+        slot = math.floor(t * self.rate_hz)
+        if slot <= self.drawn[0]:
+            return False
+        self.drawn = (slot, frame)
+        return True
+
     def box(self, entity: str, t: float, frame: int | None, T: np.ndarray, size_mm: Any,
             color: list[int]) -> None:
         """A pose (T_base_model) with axes and, if the size is known, the flat model box
-        (drawn in the model frame: the entity's own transform applies to it)."""
+        (drawn in the model frame: the entity's own transform applies to it); a frame's only
+        when `due`."""
+        if frame is not None and not self.due(frame, t):
+            return
         parts = [transform(T), rr.TransformAxes3D(axis_length=30.0)]
         if size_mm is not None:
             w, h = (float(s) for s in size_mm)
@@ -100,7 +118,10 @@ class Drawing:
     def projection(self, t: float, frame: int, found: bool, projection: Any) -> None:
         """The best model's projected points on each image, inner and outer (colours and radii
         static, per frame the positions only), at most DRAW_POINTS of each (evenly strided: a
-        picture of the pose, whose exact numbers are in data/estimate); cleared when not found."""
+        picture of the pose, whose exact numbers are in data/estimate); cleared when not found;
+        only when `due`."""
+        if not self.due(frame, t):
+            return
         for side in L.SIDES:
             if not (found and projection is not None):
                 self.rec._log(L.E_POINTS[side], t, frame, rr.Clear(recursive=True))

@@ -38,10 +38,9 @@ writes the footer (`rerun rrd verify` accepts the file).
 No file for a run that never started: the stream buffers the setup in memory and the file is
 opened at the first frame or arm sample (`written`); a start that fails before that leaves none.
 
-Cost: a rerun log call costs ~0.1-0.2 ms of Python, so the time series are queued
-(`record.drawing`) and the planes and video are encoded on two worker threads
-(`record.encoding`); the loop copies the frame and queues it.
-"""
+Cost: a rerun log call costs ~0.1-0.2 ms of Python, so the time series are queued and pictures
+drawn at the video's rate (`record.drawing`), the planes and video encoded on two worker threads
+(`record.encoding`); the loop copies the frame and queues it."""
 
 from __future__ import annotations
 
@@ -129,7 +128,7 @@ class Recorder:
         self.frames_logged = 0
         self._deferred = Worker("recorder-log", DEFERRED_FRAMES)   # the loop's logging (module docstring)
         self.encoding = None if mode == "full" else FrameEncoding(self, mode == "compact", video, video_fps)
-        self.draw = Drawing(self)
+        self.draw = Drawing(self, video_fps if mode != "full" else 0.0)
         self._log_static("world", rr.ViewCoordinates.RIGHT_HAND_Z_UP)
         self.draw.point_styles()
         for entity in L.E_ARM:
@@ -377,7 +376,7 @@ class Recorder:
             self._preview_event_due = False
             self._log(L.E_EVENTS, t, None, rr.TextLog(PREVIEW_WARNING, level="WARN"))
         self.draw.tick(t)
-        if T_base_left is not None:
+        if T_base_left is not None and self.draw.due(frame, t):
             self._log("world/rig", t, frame, transform(T_base_left))
         self._log(L.E_DATA_FRAME, t, frame, rr.AnyValues(values=L.pack(L.FRAME_LAYOUT, {
             "capture_times": capture_times, "T_base_left": T_base_left})))
@@ -422,13 +421,13 @@ class Recorder:
             self.draw.queue_scalar("plots/fitness", t, frame, float(fitness))
         self.draw.queue_scalar("plots/found", t, frame, 1.0 if found else 0.0)
         posed = found and R is not None and position_mm is not None
-        if posed:
+        if posed:  # the pictures only at the video's rate (`Drawing.due`)
             if alpha is not None:
                 self.draw.queue_scalar("plots/alpha", t, frame, float(alpha))
             T_model = make_pose(R, position_mm)
             T_base_model = T_model if T_base_left is None else T_base_left @ T_model
             self.draw.box("world/target/estimate", t, frame, T_base_model, size_mm, [255, 140, 0])
-        else:
+        elif self.draw.due(frame, t):
             self._log("world/target/estimate", t, frame, rr.Clear(recursive=False))
         self.draw.projection(t, frame, found, projection)
         self._log(L.E_DATA_EST, t, frame, rr.AnyValues(values=L.pack(L.EST_LAYOUT, {
