@@ -98,6 +98,30 @@ def test_grey_planes_rebuild_bgr_whose_grey_is_the_plane_near_the_target():
     assert np.array_equal(grey_near_target(bgr[0], hue.left, None, 3), cv2.cvtColor(bgr[0], cv2.COLOR_BGR2GRAY))
 
 
+def test_grey_planes_are_stored_cropped_and_come_back_whole():
+    """A grey plane is stored as the rectangle around its non-zero pixels and decoded to its full
+    size (0 around), an all-zero one too; a blob of an older recording (whole planes) decodes
+    as before."""
+    import io
+
+    rng = np.random.default_rng(4)
+    grey = np.zeros((H, W), np.uint8)
+    grey[20:31, 33:52] = rng.integers(1, 256, (11, 19), dtype=np.uint8)
+    planes = {"grey/left": grey, "grey/right": np.zeros((H, W), np.uint8), "fitness/left": _hue(rng)}
+    blob = encode_planes(planes)
+    with np.load(io.BytesIO(blob)) as npz:
+        keys = set(npz.files)
+        cropped = cv2.imdecode(npz[f"grey/left@{H}x{W}+20+33.png"], cv2.IMREAD_UNCHANGED)
+    assert keys == {f"grey/left@{H}x{W}+20+33.png", f"grey/right@{H}x{W}+0+0.png", "fitness/left.png"}
+    assert cropped.shape == (11, 19)
+    out = decode_planes(blob)
+    assert set(out) == set(planes) and all(np.array_equal(out[k], planes[k]) for k in planes)
+    old = io.BytesIO()
+    np.savez(old, **{f"{k}.png": cv2.imencode(".png", a)[1].reshape(-1) for k, a in planes.items()})
+    out = decode_planes(old.getvalue())
+    assert set(out) == set(planes) and all(np.array_equal(out[k], planes[k]) for k in planes)
+
+
 def test_the_container_keeps_any_field_of_the_fitness_input():
     """A plane added to the fitness input later (another dtype too) is recorded and rebuilt;
     a recording without it says which plane it lacks."""
