@@ -315,7 +315,7 @@ def test_truncated_recording_is_refused_unless_allow_partial(tmp_path: Path, cap
     capsys.readouterr()
     data = recorded.read_bytes()
     cut = tmp_path / "cut.rrd"
-    cut.write_bytes(data[: int(len(data) * 0.75)])
+    cut.write_bytes(data[: int(len(data) * 0.5)])  # (the last quarter can be all close-time flushes)
     part = read_recording(cut)
     n = len(part.frames)
     assert 1 <= n < 6 and part.truncated.startswith("no RRD footer")
