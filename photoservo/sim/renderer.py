@@ -20,16 +20,14 @@ API
   render_stereo(scene, rig, T_world_left, t, rng, effects) -> (left, right)
   StereoRenderer(rig).render(scene, T_world_left, t, rng, effects)   same, rays cached (video)
   lying_on_water(position_world, heading) -> T_world_model of a creature lying face-up
-  Water, calm_water                      the water's look (sim/water.py)
-  The scene generator (SynthParams, random_scene, synthetic_rig...) is sim/scenes.py.
+  Water, calm_water                      the water's look (sim/water.py); the scene generator: sim/scenes.py
 
-Rendering: every pixel of the (distorted) image is undistorted to a ray (cv2.undistortPointsIter,
-so the camera's lens distortion is honoured exactly), the ray is intersected with the water plane
-and with each floater's surface (plane, or a gently bent sheet solved by fixed-point iteration),
-and the photo is sampled there with premultiplied-alpha bilinear lookup from a photo prefiltered
-to the on-screen footprint (anti-aliased edges, no backdrop fringe). The per-pixel water pass
-runs as a numba kernel (renderer_kernel.py); sim/water.py's `_shade_water` is its numpy reference.
-"""
+Rendering: every pixel of the (distorted) image is undistorted to a ray (cv2.undistortPointsIter, so the
+camera's lens distortion is honoured exactly), the ray is intersected with the water plane and with each
+floater's surface (plane, or a gently bent sheet solved by fixed-point iteration), and the photo is sampled
+there with premultiplied-alpha bilinear lookup from a photo prefiltered to the on-screen footprint
+(anti-aliased edges, no backdrop fringe). The per-pixel passes run as numba kernels (renderer_kernel.py);
+sim/water.py's `_shade_water` is the water pass's numpy reference."""
 
 from __future__ import annotations
 
@@ -359,8 +357,12 @@ def coarse_rays(rays: np.ndarray, stride: int) -> np.ndarray:
                       interpolation=cv2.INTER_AREA)
 
 
-def _world_rays(rays: np.ndarray, R: np.ndarray) -> np.ndarray:
-    """Unit world rays (h, w, 3 float32) of camera-frame rays (h, w, 3) for camera rotation R."""
+def _world_rays(rays: np.ndarray, R: np.ndarray, compiled: bool = False) -> np.ndarray:
+    """Unit world rays (h, w, 3 float32) of camera-frame rays (h, w, 3) for camera rotation R
+    (compiled: renderer_kernel.window_rays, the same rays in one pass)."""
+    if compiled:
+        from photoservo.sim.renderer_kernel import window_rays
+        return window_rays(rays, R)
     d = (rays @ R.T).astype(np.float32)
     return d / np.linalg.norm(d, axis=-1, keepdims=True)  # not in place: numpy's broadcast /= is ~5x slower
 
@@ -404,13 +406,12 @@ def render_view(scene: Scene, cam: Camera, T_world_cam: np.ndarray, t: float = 0
     reference `_shade_water` (identical model; textures sampled without OpenCV's 1/32-texel
     weight quantisation, so the two differ by well under 1 DN on average).
 
-    water_stride > 1 is the fast path for live simulation (~7x less CPU at 4, benchmarks/render_speed.py): the water is
-    shaded on a grid of one ray per stride x stride block (`coarse_rays(rays, stride)`, or
-    `water_rays` when precomputed) and upsampled bilinearly, so waves, mottle and glints keep
-    their look but not their finest detail; floaters and foam are still drawn at full resolution
-    (full-resolution rays only inside their image windows), and the sensor noise is a window of
-    a pre-drawn noise tile at a random offset. Same rng state -> same image. water_stride = 1 is
-    the exact render."""
+    water_stride > 1 is the fast path for live simulation (~7x less CPU at 4, benchmarks/render_speed.py): the
+    water is shaded on a grid of one ray per stride x stride block (`coarse_rays(rays, stride)`, or `water_rays`
+    when precomputed) and upsampled bilinearly, so waves, mottle and glints keep their look but not their finest
+    detail; floaters and foam are still drawn at full resolution (full-resolution rays only inside their image
+    windows, by the compiled kernels), and the sensor noise is a window of a pre-drawn noise tile at a random
+    offset. Same rng state -> same image. water_stride = 1 is the exact render."""
     if int(water_stride) != water_stride or water_stride < 1:
         raise InputError(f"water_stride {water_stride!r}: must be a positive integer")
     water_stride = int(water_stride)
@@ -435,9 +436,9 @@ def render_view(scene: Scene, cam: Camera, T_world_cam: np.ndarray, t: float = 0
     T_cam_world = np.linalg.inv(T)
     for f in (*scene.distractors, *(() if scene.target is None else (scene.target,))):
         win = _window(cam, T_cam_world, _floater_box(f))
-        if win is None:
-            continue
-        _lay_floater(img, win, _floater_layer(f, C, _world_rays(rays[win], R) if fast else d[win], fast), shade, fast)
+        if win is not None:
+            _lay_floater(img, win, _floater_layer(f, C, _world_rays(rays[win], R, True) if fast else d[win], fast),
+                         shade, fast)
     if scene.foam is not None and len(scene.foam.patches):
         for patch in np.asarray(scene.foam.patches, float).reshape(-1, 3):
             x, y, r = patch

@@ -128,6 +128,30 @@ def shade_water(rays: np.ndarray, R: np.ndarray, C: np.ndarray, waves: np.ndarra
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
+def world_rays(rays, R, d):
+    """d (h,w,3 float32) <- unit world rays of camera-frame rays (h,w,3) for camera rotation R:
+    `renderer._world_rays` (R · ray in double, then float32 and normalised in float32) fused."""
+    h, w = d.shape[:2]
+    for i in range(h):
+        for j in range(w):
+            x, y, z = rays[i, j, 0], rays[i, j, 1], rays[i, j, 2]
+            a = np.float32(x * R[0, 0] + y * R[0, 1] + z * R[0, 2])
+            b = np.float32(x * R[1, 0] + y * R[1, 1] + z * R[1, 2])
+            c = np.float32(x * R[2, 0] + y * R[2, 1] + z * R[2, 2])
+            n = np.sqrt(a * a + b * b + c * c)
+            d[i, j, 0] = a / n
+            d[i, j, 1] = b / n
+            d[i, j, 2] = c / n
+
+
+def window_rays(rays: np.ndarray, R: np.ndarray) -> np.ndarray:
+    """Run `world_rays` into a fresh float32 array (a floater's image window, fast path)."""
+    d = np.empty(rays.shape, np.float32)
+    world_rays(rays, np.ascontiguousarray(R, np.float64), d)
+    return d
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
 def floater_hits(d, Tm, o, alpha, ox, oy, W, H, bend, half_w, u, v, valid, near):
     """`renderer._floater_layer`'s map from image to photo, fused: for unit world rays d (h,w,3)
     from a camera at model-frame centre o (mm), their hit on the floater's surface (the model

@@ -219,8 +219,8 @@ class SimScene:
         """The compiled kernels `render` runs (for the session's warm start)."""
         from photoservo.sim import renderer_kernel
 
-        return [renderer_kernel.water_pass, renderer_kernel.floater_hits, renderer_kernel.footprint_values,
-                renderer_kernel.composite_floater]
+        return [renderer_kernel.water_pass, renderer_kernel.world_rays, renderer_kernel.floater_hits,
+                renderer_kernel.footprint_values, renderer_kernel.composite_floater]
 
     def warm(self) -> None:
         """Compile or load the renderer's kernels (issue 10, warm start): one left view from
