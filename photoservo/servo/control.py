@@ -31,7 +31,7 @@ class ServoParams:
     max_speed_mm_s: float  # cap on the commanded camera speed
     max_rotation_deg_s: float  # cap on the commanded camera angular speed
     damping: float  # damped-least-squares lambda for the joint-velocity solve
-    max_estimate_age_s: float  # older estimate -> controlled stop
+    max_estimate_age_s: float  # older estimate -> controlled stop (the limit at a high frame rate, s)
     hold_tolerance_mm: float  # collection may start once the position error stays below this
     hold_tolerance_deg: float  # ... and the yaw error below this
     hold_time_s: float  # ... for this long
@@ -40,10 +40,13 @@ class ServoParams:
     tool_dwell_s: float  # how long the tool output stays on at the bottom
     settle_s: float = 5.0  # scores (simulation): the hold error counts from this session time on (s)
     search_pose_deg: tuple[float, ...] = ()  # joints (deg) to move to when the creature leaves the view; () = hold
+    estimate_age_frames: float = 2.0  # slower frames: the age limit is the latency plus this many frame intervals...
+    max_estimate_age_cap_s: float = 1.0  # ...but never over this (s)
 
     def validate(self, where: str) -> None:
         for name in ("hover_mm", "k_position", "k_rotation", "max_speed_mm_s", "max_rotation_deg_s",
-                     "max_estimate_age_s", "hold_time_s", "collect_height_mm", "collect_speed_mm_s"):
+                     "max_estimate_age_s", "hold_time_s", "collect_height_mm", "collect_speed_mm_s",
+                     "max_estimate_age_cap_s"):
             if getattr(self, name) <= 0:
                 raise InputError(f"config key '{where}.{name}' must be > 0, got {getattr(self, name)}")
         if not 0.0 <= self.feed_forward <= 1.0:
@@ -51,8 +54,28 @@ class ServoParams:
         if len(self.search_pose_deg) not in (0, 7):
             raise InputError(f"config key '{where}.search_pose_deg' must be [] or 7 joint angles (deg), "
                              f"got {len(self.search_pose_deg)} numbers")
+        if self.max_estimate_age_cap_s < self.max_estimate_age_s:
+            raise InputError(f"config key '{where}.max_estimate_age_cap_s' must be >= max_estimate_age_s "
+                             f"({self.max_estimate_age_s}), got {self.max_estimate_age_cap_s}")
         if self.collect_height_mm >= self.hover_mm:
             raise InputError(f"config key '{where}.collect_height_mm' must be below hover_mm ({self.hover_mm})")
+
+
+def estimate_age_limit(params: ServoParams, latency_s: float, interval_s: float) -> float:
+    """How old (s) an estimate may be for the arm to move on it: [servo] max_estimate_age_s, or,
+    when frames come slower, the measured delivery latency (capture -> track at the controller,
+    s) plus estimate_age_frames measured frame intervals (s) — an estimate is always at least
+    the latency old and one interval more before the next one comes, and a late frame must not
+    stop-start the arm — never more than max_estimate_age_cap_s.
+
+    >>> p = ServoParams(600, 2, 2, 1, 250, 45, 0.05, 0.3, 10, 3, 1.5, 250, 80, 0.5)
+    >>> estimate_age_limit(p, 0.05, 1 / 30), round(estimate_age_limit(p, 0.15, 1 / 3), 2)
+    (0.3, 0.82)
+    >>> estimate_age_limit(p, 0.3, 1.0)
+    1.0
+    """
+    return min(max(params.max_estimate_age_s, latency_s + params.estimate_age_frames * interval_s),
+               params.max_estimate_age_cap_s)
 
 
 def long_axis(R_base_model: np.ndarray, size_mm: tuple[float, float]) -> np.ndarray:

@@ -27,6 +27,7 @@ from photoservo.servo.control import (
     ServoParams,
     camera_twist,
     desired_camera_pose,
+    estimate_age_limit,
     flange_twist,
     yaw_error_deg,
 )
@@ -54,13 +55,50 @@ class ControlInfo:
     tool: bool
 
 
+PACE_GAIN = 0.25  # smoothing of the measured frame interval and latency (`FramePace`)
+
+
+@dataclass
+class FramePace:
+    """The pace of the tracks reaching the controller, measured on its clock: the interval
+    between successive frames' capture times and the delivery latency (capture -> the first
+    control period that has the track), both smoothed (PACE_GAIN), in s."""
+
+    t_frame: float | None = None  # capture time of the newest track seen (s)
+    interval_s: float = 0.0
+    latency_s: float = 0.0
+    frames: int = 0
+
+    def see(self, now: float, track: Track | None) -> None:
+        """A control period at `now` (s) with `track`: measure it if it is a new frame."""
+        if track is None or track.t == self.t_frame:
+            return
+        latency = max(now - track.t, 0.0)
+        if self.frames == 0:
+            self.latency_s = latency
+        else:
+            d = track.t - self.t_frame
+            self.interval_s = d if self.frames == 1 else self.interval_s + PACE_GAIN * (d - self.interval_s)
+            self.latency_s += PACE_GAIN * (latency - self.latency_s)
+        self.frames += 1
+        self.t_frame = track.t
+
+    def limit_s(self, params: ServoParams) -> float:
+        """The age limit at this pace (`estimate_age_limit`); max_estimate_age_s until two frames
+        have been seen (one track's age is no latency: it may be a stale one)."""
+        if self.frames < 2:
+            return params.max_estimate_age_s
+        return estimate_age_limit(params, self.latency_s, self.interval_s)
+
+
 @dataclass
 class Controller:
     """One control period of position-based visual servoing (servo/control.py) on the PA-10:
     camera twist -> flange twist -> joint velocities by damped least squares (robot/pa10.py,
     null space pulled toward HOME_Q) -> Ruckig velocity interface with the safety layer
-    (servo/motion.py). A controlled stop when the track is missing or older than
-    max_estimate_age_s, or the target leaves the reachable workspace."""
+    (servo/motion.py). A controlled stop when the track is missing or older than the age limit
+    (`estimate_age_limit`: max_estimate_age_s, longer when frames come slower, at the
+    `FramePace` measured here), or the target leaves the reachable workspace."""
 
     params: ServoParams
     motion: Motion
@@ -75,6 +113,7 @@ class Controller:
     tool_on: bool = False
     collected: bool = False
     events: list[tuple[float, str]] = field(default_factory=list)
+    pace: FramePace = field(default_factory=FramePace)
 
     def __post_init__(self) -> None:
         self.height_mm = self.params.hover_mm
@@ -90,16 +129,16 @@ class Controller:
         T_base_flange = pa10.fk(q)
         T_base_cam = T_base_flange @ self.T_flange_left
         stop = ""
+        self.pace.see(now, track)
         if track is None or track.T_base_model is None:
             stop = "no target"
-        elif now - track.t + track.coast_s > p.max_estimate_age_s:  # a coasting pose is as old as its measurement
-            stop = f"estimate {1e3 * (now - track.t + track.coast_s):.0f} ms old"
+        elif (age := now - track.t + track.coast_s) > (limit := self.pace.limit_s(p)):  # coasting: measurement's age
+            stop = f"estimate {1e3 * age:.0f} ms old (limit {1e3 * limit:.0f} ms)"
         T_des = None
         if not stop:
             if self.phase == "search":
                 self._enter(now, "servo", f"creature {track.status} again, leaving the search pose")
-            T_target = track.T_base_model.copy()
-            T_target[:3, 3] += track.velocity_mm_s * (now - track.t)
+            T_target, v_target = target_now(track, now)
             if np.linalg.norm(T_target[:3, 3] - np.array([0.0, 0.0, pa10.DH_D_MM[0]])) > REACH_MM:
                 stop = "target out of reach"
             else:
@@ -116,7 +155,7 @@ class Controller:
             e_p = e[:3]
             yaw = yaw_error_deg(T_base_cam, T_des)
             self._update_hold(now, float(np.linalg.norm(e_p)), yaw)
-            v, w = camera_twist(e, track.velocity_mm_s, p)
+            v, w = camera_twist(e, v_target, p)
             twist = flange_twist(v, w, T_base_cam[:3, 3], T_base_flange[:3, 3])
             dq_target = pa10.dls_step(q, twist, p.damping, k_null=0.5)
             sp = self.motion.velocity_step(q, dq, dq_target)
@@ -164,6 +203,20 @@ class Controller:
             if self.height_mm >= p.hover_mm:
                 done = self.collected
                 self._enter(now, "done" if done else "servo", "collection complete" if done else "back at hover height")
+
+
+def target_now(track: Track, now: float) -> tuple[np.ndarray, np.ndarray]:
+    """The target's pose (4x4, base frame, mm) and velocity (mm/s) predicted from a track to the
+    time `now` (s, the track's clock): constant velocity from its capture time, the height and
+    vertical velocity from its heave when it has one (vision/heave.py: an oscillation, not a
+    constant vertical velocity)."""
+    dt = now - track.t
+    T = track.T_base_model.copy()
+    T[:3, 3] += track.velocity_mm_s * dt
+    v = np.array(track.velocity_mm_s, dtype=float)
+    if track.heave is not None:
+        T[2, 3], v[2] = track.heave.z(dt), track.heave.vz(dt)
+    return T, v
 
 
 def phase_event(phase: Phase, why: str) -> str:

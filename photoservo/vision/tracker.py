@@ -3,8 +3,9 @@
 Each frame comes with T_base_left, where the left camera (on the arm) was in the base frame (mm)
 when it was taken. Population and constant-velocity model live in the BASE frame: the poses are
 re-expressed in each frame's camera (`_rebase`), the prediction at the capture time gives a search
-window, a few GA generations run within a time budget, and the best pose updates an alpha-beta
-filter (position, velocity) and a smoothed alpha (the creature's size does not change).
+window, a few GA generations run within a time budget, and the best pose updates the motion
+model (vision/motion_model.py: an alpha-beta filter on position and velocity, a smoothed alpha,
+and on known water the height as the fitted heave, an oscillation about a level: vision/heave.py).
 
 A frame's best pose is a measurement when its fitness reaches the detection threshold (the
 fitness level that passed the estimator's image-relative detection at the last acquisition,
@@ -59,7 +60,9 @@ from photoservo.geometry import invert_pose, make_pose
 from photoservo.vision.estimator import Acquired, EstimatorParams, acquisition
 from photoservo.vision.fitness import FitnessParams, StereoHue
 from photoservo.vision.ga import GAParams
+from photoservo.vision.heave import Heave
 from photoservo.vision.measurement import visible_shares, water_gate
+from photoservo.vision.motion_model import MotionModel
 from photoservo.vision.photo_model import PhotoModel
 from photoservo.vision.pose_search import Candidate, PoseSearch
 from photoservo.vision.rig import Rig
@@ -72,7 +75,6 @@ LOCAL_SEARCH_S = 1.0  # lost this long after the last measurement: the whole vol
 PAIRS_AFTER_S = 0.5  # the last measurement this old (a loaded machine's long frames): blob pairs seeded
 REFERENCE_FPS = 30.0  # the frame rate acquire_generations is a per-frame share at (Hz)...
 SHARE_MAX = 4  # ...and a later frame's share at most this many times it (longer frames feed on themselves)
-HEAVE_HORIZON_S = 0.25  # known water: the vertical velocity (heave) is extrapolated this long at most (s)
 
 
 @dataclass(frozen=True)
@@ -135,6 +137,7 @@ class Track:
     seconds: float
     acquire_generations: int = 0  # GA generations of the whole-volume search this frame
     coast_s: float = 0.0  # how much older than the frame the measurement behind its pose is (s)
+    heave: Heave | None = None  # known water: the fitted heave (vision/heave.py), its times relative to t
 
 
 class TrackerConfig(Protocol):
@@ -183,11 +186,7 @@ class Tracker:
         self.status: Status = "acquiring"
         self.misses = 0
         self.frames = 0
-        self.p_base: np.ndarray | None = None  # filtered position
-        self.v_base = np.zeros(3)
-        self.R_base: np.ndarray | None = None
-        self.alpha: float | None = None
-        self.t_last: float | None = None  # time of the last measurement
+        self.motion = MotionModel(params.gain_position, params.gain_velocity, params.gain_alpha, params.water_z_mm)
         self.T_base_left_last: np.ndarray | None = None
         self.acquisitions = 0
         self.threshold = math.inf  # fitness that counts as found: set by each acquisition
@@ -207,24 +206,13 @@ class Tracker:
     # ------------------------------------------------------------------ prediction
 
     def predict(self, t: float) -> np.ndarray | None:
-        """T_base_model predicted at time t (constant velocity; orientation held). On known water
-        the vertical velocity (heave, an oscillation about the plane) is extrapolated for at most
-        HEAVE_HORIZON_S: a creature hidden for seconds still floats on the water."""
-        if self.p_base is None or self.R_base is None or self.t_last is None:
-            return None
-        dt = t - self.t_last
-        d = self.v_base * dt
-        if math.isfinite(self.p.water_z_mm):
-            d[2] = self.v_base[2] * min(dt, HEAVE_HORIZON_S)
-        T = np.eye(4)
-        T[:3, :3] = self.R_base
-        T[:3, 3] = self.p_base + d
-        return T
+        """T_base_model predicted at time t (s) by the motion model (vision/motion_model.py)."""
+        return self.motion.predict(t)
 
     def _in_view(self, T_left_model: np.ndarray) -> bool:
         """At least min_visible of the model in both images at a left-camera pose, track's alpha."""
         return T_left_model[2, 3] > 1.0 and min(visible_shares(
-            T_left_model[:3, :3], T_left_model[:3, 3], self.alpha, self.model, self.rig)) >= self.p.min_visible
+            T_left_model[:3, :3], T_left_model[:3, 3], self.motion.alpha, self.model, self.rig)) >= self.p.min_visible
 
     # ------------------------------------------------------------------ one frame
 
@@ -244,11 +232,11 @@ class Tracker:
         n = n_acq = 0
         far = False
         if self.search is not None:
-            old = self.status == "lost" or t - self.t_last > PAIRS_AFTER_S
+            old = self.status == "lost" or t - self.motion.t_last > PAIRS_AFTER_S
             near, far = self._pairs(frame, T_left_base, t) if old else ([], False)
             m, best, n = self._measure_step(frame, T_base_left, T_left_base, T_new_old, t, gens, near)
         if m is None and (self.search is None or far or self.acquiring is not None
-                          or (self.status == "lost" and t - self.t_last > LOCAL_SEARCH_S)):
+                          or (self.status == "lost" and t - self.motion.t_last > LOCAL_SEARCH_S)):
             acq, n_acq = self._acquire_step(frame, left_bgr, right_bgr, T_base_left, t)
             if acq is not None:  # found on the frame it started on: taken, then confirmed on this one
                 self._accept(acq)
@@ -268,11 +256,12 @@ class Tracker:
         return Track(
             t=t, status=self.status, found=m is not None, fitness=fitness,
             T_base_model=self.predict(t) if self.status in ("tracking", "coasting") else None,
-            velocity_mm_s=self.v_base.copy(),
-            alpha=self.alpha, size_mm=None if self.alpha is None else self.model.size_mm(self.alpha),
+            velocity_mm_s=self.motion.velocity(t),
+            heave=None if self.motion.heave is None else self.motion.heave.shifted(-t),
+            alpha=(a := self.motion.alpha), size_mm=None if a is None else self.model.size_mm(a),
             R_left=None if c is None else c.R, t_left=None if c is None else c.position_mm,
             alpha_measured=None if c is None else c.alpha, generations=n, seconds=time.perf_counter() - t0,
-            acquire_generations=n_acq, coast_s=0.0 if self.t_last is None else max(0.0, t - self.t_last),
+            acquire_generations=n_acq, coast_s=0.0 if self.motion.t_last is None else max(0.0, t - self.motion.t_last),
         )
 
     def _confirm(self, frame: StereoHue, T_base_left: np.ndarray, T_left_base: np.ndarray, t: float,
@@ -311,10 +300,10 @@ class Tracker:
 
     def _plausible(self, p: np.ndarray, t: float) -> bool:
         """A measurement further from the prediction than max_speed allows is a miss."""
-        if self.t_last is None:
+        if self.motion.t_last is None:
             return True
-        dt = max(t - self.t_last, 1e-3)
-        pred = self.p_base + self.v_base * dt
+        dt = max(t - self.motion.t_last, 1e-3)
+        pred = self.motion.p + self.motion.v * dt
         return float(np.linalg.norm(p - pred)) <= (self.p.max_speed_mm_s + self.p.window_growth_mm_s) * dt \
             + self.p.window_position_mm
 
@@ -326,8 +315,8 @@ class Tracker:
         old) and the velocity kept; after leaving the view, or by the whole-volume search, the
         motion model starts afresh."""
         if self.status == "out_of_view" or m.acquired:
-            self.p_base, self.t_last, self.v_base = None, None, np.zeros(3)
-        self._correct(m.T_base_model, m.c.alpha, m.t, restart=restart or self.status == "lost")
+            self.motion.restart()
+        self.motion.correct(m.T_base_model, m.c.alpha, m.t, restart=restart or self.status == "lost")
         self.misses = 0
         self.status = "tracking"
 
@@ -343,27 +332,6 @@ class Tracker:
             self.status = "coasting"
         else:
             self.status = "lost"  # the search stays around the predicted track
-
-    def _correct(self, T_bm: np.ndarray, alpha_m: float, t: float, restart: bool = False) -> None:
-        """Alpha-beta update of position/velocity, orientation taken as measured, alpha smoothed;
-        `restart`: the position taken as measured, the velocity kept."""
-        p_m = T_bm[:3, 3]
-        if self.p_base is None or self.t_last is None:
-            self.p_base, self.v_base = p_m.copy(), np.zeros(3)
-            self.alpha = float(alpha_m)
-        elif restart:
-            self.p_base = p_m.copy()
-            self.alpha = float(self.alpha + self.p.gain_alpha * (alpha_m - self.alpha))
-        else:
-            dt = t - self.t_last
-            pred = self.p_base + self.v_base * dt
-            r = p_m - pred
-            self.p_base = pred + self.p.gain_position * r
-            if dt > 1e-3:  # a second measurement of one instant says nothing of the velocity
-                self.v_base = self.v_base + (self.p.gain_velocity / dt) * r
-            self.alpha = float(self.alpha + self.p.gain_alpha * (alpha_m - self.alpha))
-        self.R_base = T_bm[:3, :3].copy()
-        self.t_last = t
 
     # ------------------------------------------------------------------ whole-volume search
 
@@ -387,7 +355,8 @@ class Tracker:
             self.acquiring = None
             self.acquisitions += bool(end.value.islands)  # a search ran (a frame without blob pairs has none)
             T_pred = self.predict(a.t)
-            chosen = choose(end.value.results, a.T_base_left, self.alpha, None if T_pred is None else T_pred[:3, 3],
+            chosen = choose(end.value.results, a.T_base_left, self.motion.alpha,
+                            None if T_pred is None else T_pred[:3, 3],
                             self.p.size_tolerance)
             if chosen is not None:
                 d, c = chosen
@@ -409,7 +378,7 @@ class Tracker:
         T_pred = self.predict(t)
         if T_pred is None:
             return [], False
-        reach = self._grown(t - self.t_last) + max(self.model.size_mm(self.alpha))
+        reach = self._grown(t - self.motion.t_last) + max(self.model.size_mm(self.motion.alpha))
         return near_pairs(frame, self.model, self.rig, self.est_params, (T_left_base @ T_pred)[:3, 3], reach)
 
     # ------------------------------------------------------------------ tracking search
@@ -473,10 +442,10 @@ class Tracker:
         if T_pred is not None:
             T_lm = T_left_base @ T_pred
             if T_lm[2, 3] > 1.0:
-                self._window(T_lm[:3, :3], T_lm[:3, 3], float(self.alpha), t - self.t_last)
-                s.seed(T_lm[:3, :3], T_lm[:3, 3], np.array([self.alpha]))
+                self._window(T_lm[:3, :3], T_lm[:3, 3], float(self.motion.alpha), t - self.motion.t_last)
+                s.seed(T_lm[:3, :3], T_lm[:3, 3], np.array([self.motion.alpha]))
                 for pair in near:
-                    s.seed(T_lm[:3, :3], pair.position_mm, np.array([self.alpha]))
+                    s.seed(T_lm[:3, :3], pair.position_mm, np.array([self.motion.alpha]))
         t_end = time.perf_counter() + self.p.time_budget_ms * 1e-3
         n = 0
         while n < max_generations:
