@@ -14,6 +14,7 @@ import numpy as np
 
 from photoservo.vision.heave import HEAVE_WINDOW_S, Heave, fit_heave
 
+FIRST_VELOCITY_S = 0.1  # a first measurement this long after the one that started the motion gives its velocity (s)
 HEAVE_HORIZON_S = 0.25  # known water, no heave fitted yet: the vertical velocity is extrapolated this long at most (s)
 
 
@@ -34,12 +35,13 @@ class MotionModel:
     t_last: float | None = None
     heights: list[tuple[float, float]] = field(default_factory=list)  # (t s, z mm) measured
     heave: Heave | None = None
+    fresh: bool = True  # the velocity is not measured yet (no second measurement since the start)
 
     def restart(self) -> None:
         """The motion starts afresh (a creature back in view, a whole-volume search's answer):
         no position, velocity or heave; orientation and alpha kept."""
         self.p, self.t_last, self.v = None, None, np.zeros(3)
-        self.heights, self.heave = [], None
+        self.heights, self.heave, self.fresh = [], None, True
 
     def predict(self, t: float) -> np.ndarray | None:
         """T_base_model predicted at time t (s): constant velocity, orientation held; on known
@@ -68,13 +70,21 @@ class MotionModel:
     def correct(self, T_bm: np.ndarray, alpha_m: float, t: float, restart: bool = False) -> None:
         """A measurement T_bm (4x4, base frame) with alpha_m (px/mm) at time t (s): alpha-beta
         update of position and velocity, orientation taken as measured, alpha smoothed;
-        `restart`: the position taken as measured, the velocity kept. On known water its height
+        `restart`: the position taken as measured, the velocity kept — or, the first time after
+        the motion started (a whole-volume search's answer confirmed on a newer frame, at least
+        FIRST_VELOCITY_S later), measured from the two: at 2-5 fps with a generation or two per
+        frame, a track that starts at rest never catches up with a drifting creature, and its
+        prediction stays in view after the creature left (issue 10). On known water its height
         joins the last HEAVE_WINDOW_S of heights and the heave is fitted again."""
         p_m = T_bm[:3, 3]
         if self.p is None or self.t_last is None:
             self.p, self.v = p_m.copy(), np.zeros(3)
             self.alpha = float(alpha_m)
         elif restart:
+            dt = t - self.t_last
+            if self.fresh and dt >= FIRST_VELOCITY_S:
+                self.v = (p_m - self.p) / dt
+                self.fresh = False
             self.p = p_m.copy()
             self.alpha = float(self.alpha + self.gain_alpha * (alpha_m - self.alpha))
         else:
@@ -84,6 +94,7 @@ class MotionModel:
             self.p = pred + self.gain_position * r
             if dt > 1e-3:  # a second measurement of one instant says nothing of the velocity
                 self.v = self.v + (self.gain_velocity / dt) * r
+                self.fresh = False
             self.alpha = float(self.alpha + self.gain_alpha * (alpha_m - self.alpha))
         self.R = T_bm[:3, :3].copy()
         self.t_last = t

@@ -47,6 +47,7 @@ Pure: arrays in, arrays out; time is whatever clock the caller stamps frames wit
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 from collections.abc import Generator
@@ -239,12 +240,14 @@ class Tracker:
                           or (self.status == "lost" and t - self.motion.t_last > LOCAL_SEARCH_S)):
             acq, n_acq = self._acquire_step(frame, left_bgr, right_bgr, T_base_left, t)
             if acq is not None:  # found on the frame it started on: taken, then confirmed on this one
+                track_before = dataclasses.replace(self.motion), self.status
                 self._accept(acq)
                 self._restart_search(frame, T_left_base @ acq.T_base_model, acq.c.alpha)
                 if acq.t < t:
                     m, best, n = self._confirm(frame, T_base_left, T_left_base, t, max_generations)
-                    if m is None:  # the creature moved on from where it was found: a track lost already
+                    if m is None:  # the creature moved on from where it was found: the track before stands
                         acq, self.misses = None, self.p.lost_frames - 1
+                        self.motion, self.status = track_before
         if m is not None:
             self.acquiring = None
             self._accept(m, restart=acq is not None)
