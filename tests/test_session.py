@@ -113,6 +113,21 @@ def test_target_motion_is_face_up_drifting_and_heaving():
     assert h == pytest.approx(m.velocity(0.295), abs=0.5)
 
 
+def test_irregular_sea_is_no_one_sinusoid_with_the_same_rms_and_a_consistent_velocity():
+    """`[sim] heave_irregular`: the check of the tracker's heave model on a sea it was not made
+    for; seeded, about the regular heave's RMS, not periodic at heave_period_s."""
+    cfg = load_config(overrides=["sim.heave_irregular=true"])
+    m = TargetMotion.from_params(cfg.sim)
+    assert m.heave_terms == TargetMotion.from_params(cfg.sim).heave_terms and len(m.heave_terms) == 5
+    t = np.arange(0.0, 120.0, 0.05)
+    z = np.array([m.pose(x)[2, 3] for x in t]) - cfg.sim.water_z_mm
+    assert np.sqrt(np.mean(z ** 2)) == pytest.approx(cfg.sim.heave_mm / np.sqrt(2), rel=0.15)
+    period = int(round(cfg.sim.heave_period_s / 0.05))
+    assert np.sqrt(np.mean((z[period:] - z[:-period]) ** 2)) > 5.0  # one sinusoid would repeat exactly
+    h = (m.pose(7.31)[:3, 3] - m.pose(7.30)[:3, 3]) / 0.01
+    assert h == pytest.approx(m.velocity(7.305), abs=0.5)
+
+
 def test_lockstep_arm_speaks_the_wire_protocol(cfg):
     arm = LockstepArm(cfg.emulator, pa10.load_limits(), pa10.HOME_Q)
     q = pa10.HOME_Q.copy()

@@ -32,6 +32,10 @@ from photoservo.sim.renderer import (
 )
 
 FACE_UP = np.diag([1.0, -1.0, -1.0])  # Rx(180 deg): model z down into the water
+#: `[sim] heave_irregular`: the heave as a sum of sinusoids, (period per heave_period_s, amplitude
+#: per heave_mm) each, phases drawn from [sim] seed; RMS that of the one sinusoid (1.01x), periods
+#: 1.7-7 s at the default 4 s (what a model of one sinusoid was not fitted on)
+IRREGULAR_SEA = ((0.45, 0.30), (0.62, 0.45), (0.95, 0.60), (1.35, 0.50), (1.75, 0.35))
 OCCLUSION_RADIUS = 0.8  # `[sim] occlusion_s` foam: patch radius per creature length (covers it to the tips)
 
 
@@ -62,6 +66,7 @@ class SimParams:
     start_yaw_deg: float  # ... and yawed this much from it (deg)
     lockstep: bool  # true: simulated clock (deterministic); false: real time
     occlusion_s: tuple[float, ...]  # [t0, t1]: foam over the creature from t0 to t1 (s); [] = never
+    heave_irregular: bool = False  # an irregular sea: IRREGULAR_SEA's sinusoids instead of one
 
     def validate(self, where: str) -> None:
         occ = self.occlusion_s
@@ -85,12 +90,13 @@ class TargetMotion:
     p0: np.ndarray  # (3,) start position on the water surface
     heading: float  # rad
     v: np.ndarray  # (3,) drift velocity (horizontal)
-    heave: float
-    heave_period: float
+    heave: float  # heave amplitude (mm)...
+    heave_period: float  # ...and period (s) of one sinusoid, or:
     roll: float  # rad
     roll_period: float
     pitch: float  # rad
     pitch_period: float
+    heave_terms: tuple[tuple[float, float, float], ...] = ()  # (amplitude mm, period s, phase rad) each, if any
 
     @classmethod
     def from_params(cls, p: SimParams, offset_xy: tuple[float, float] = (0.0, 0.0),
@@ -103,6 +109,7 @@ class TargetMotion:
             heave=p.heave_mm, heave_period=p.heave_period_s,
             roll=math.radians(p.roll_deg), roll_period=p.roll_period_s,
             pitch=math.radians(p.pitch_deg), pitch_period=p.pitch_period_s,
+            heave_terms=irregular_sea(p.heave_mm, p.heave_period_s, p.seed) if p.heave_irregular else (),
         )
 
     def pose(self, t: float) -> np.ndarray:
@@ -113,13 +120,31 @@ class TargetMotion:
              @ axis_rotation(1, self.pitch * math.sin(w_p * t + 1.0)) @ FACE_UP)
         T = np.eye(4)
         T[:3, :3] = R
-        T[:3, 3] = self.p0 + self.v * t + np.array([0.0, 0.0, self.heave * math.sin(w_h * t)])
+        T[:3, 3] = self.p0 + self.v * t + np.array([0.0, 0.0, self.heave_z(t)[0]])
         return T
+
+    def heave_z(self, t: float) -> tuple[float, float]:
+        """The heave at time t (s): height above the water's level (mm) and its rate (mm/s)."""
+        if not self.heave_terms:
+            w_h = 2 * math.pi / self.heave_period
+            return self.heave * math.sin(w_h * t), self.heave * w_h * math.cos(w_h * t)
+        z = vz = 0.0
+        for a, period, phase in self.heave_terms:
+            w = 2 * math.pi / period
+            z += a * math.sin(w * t + phase)
+            vz += a * w * math.cos(w * t + phase)
+        return z, vz
 
     def velocity(self, t: float) -> np.ndarray:
         """Linear velocity of the model origin at time t (mm/s, base frame)."""
-        w_h = 2 * math.pi / self.heave_period
-        return self.v + np.array([0.0, 0.0, self.heave * w_h * math.cos(w_h * t)])
+        return self.v + np.array([0.0, 0.0, self.heave_z(t)[1]])
+
+
+def irregular_sea(heave_mm: float, period_s: float, seed: int) -> tuple[tuple[float, float, float], ...]:
+    """`[sim] heave_irregular`: IRREGULAR_SEA scaled to heave_mm and period_s, with phases
+    drawn from `seed`: ((amplitude mm, period s, phase rad), ...)."""
+    phases = np.random.default_rng(seed + 1000).uniform(0.0, 2 * math.pi, len(IRREGULAR_SEA))
+    return tuple((a * heave_mm, k * period_s, float(ph)) for (k, a), ph in zip(IRREGULAR_SEA, phases))
 
 
 def occluded(occlusion_s: tuple[float, ...], t: float) -> bool:
