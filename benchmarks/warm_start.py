@@ -1,7 +1,8 @@
 """Warm start (issue 10): how long the first run after installing spends compiling the numba
 kernels, and how long a later run spends loading them — what `photoservo track` does before its
-clock starts (servo/warm.py): the fitness kernels (vision process) and the renderer's water pass
-(the simulator's renderer process).
+clock starts (servo/warm.py): the fitness kernels (vision process), the renderer's kernels (the
+simulator's renderer process) and the arm's forward kinematics (robot/pa10_kernel.py; loaded
+again by the control process).
 
 Each measurement runs in a fresh Python process (numba keeps compiled code per process): with an
 empty NUMBA_CACHE_DIR (a first run) and then again with the cache that run left (a later run).
@@ -27,17 +28,24 @@ import numpy as np
 from photoservo.fileio import write_text_atomic
 
 OUT = Path(__file__).resolve().parent / "out" / "warm_start.json"
+KERNELS = ("fitness", "renderer", "kinematics")
 
 CHILD = r"""
 import json, time
 t0, c0 = time.perf_counter(), time.process_time()
 from photoservo.config import load_config
+from photoservo.robot import pa10_kernel
+from photoservo.servo.warm import warm_kinematics
 from photoservo.sim.run import build_sim
 from photoservo.vision.warm import fitness_kernels, kernels_cached, warm_fitness
 cfg = load_config(None, [])
+out = {"imports_s": time.perf_counter() - t0}
+w, c = time.perf_counter(), time.process_time()
+cached = kernels_cached([pa10_kernel.fk_frames_kernel])
+warm_kinematics()  # before build_sim, which computes the arm's kinematics
+out["kinematics"] = {"wall_s": time.perf_counter() - w, "cpu_s": time.process_time() - c}
 sim = build_sim(cfg)
-out = {"imports_s": time.perf_counter() - t0,
-       "cached_before": kernels_cached(fitness_kernels(cfg.fitness) + sim.scene.kernels())}
+out["cached_before"] = cached and kernels_cached(fitness_kernels(cfg.fitness) + sim.scene.kernels())
 for name, warm in (("fitness", lambda: warm_fitness(sim.scene.model, sim.rig, cfg.fitness)),
                    ("renderer", sim.scene.warm)):
     w, c = time.perf_counter(), time.process_time()
@@ -67,10 +75,10 @@ def main() -> None:
     for kind, rs in runs.items():
         assert all(r["cached_before"] == (kind == "later") for r in rs), "cache state not as expected"
         table[kind] = {k: {m: float(np.median([r[k][m] for r in rs])) for m in ("wall_s", "cpu_s")}
-                       for k in ("fitness", "renderer")}
+                       for k in KERNELS}
     print(f"load average {load[0]:.1f} / {load[1]:.1f} / {load[2]:.1f}; medians of {args.repeats} fresh processes")
     print(f"{'kernel':<10} {'first run wall / CPU s':>24} {'later run wall / CPU s':>24}")
-    for k in ("fitness", "renderer"):
+    for k in KERNELS:
         f, lt = table["first"][k], table["later"][k]
         print(f"{k:<10} {f['wall_s']:>11.2f} / {f['cpu_s']:<10.2f} {lt['wall_s']:>11.2f} / {lt['cpu_s']:<10.2f}")
     OUT.parent.mkdir(parents=True, exist_ok=True)
