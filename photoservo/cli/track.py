@@ -316,7 +316,7 @@ def _stopped(args, rec) -> str:
 
 def _run_hardware(args, cfg) -> int:
     from photoservo.fileio import read_image
-    from photoservo.servo.session import run_realtime
+    from photoservo.servo.realtime import run_realtime
     from photoservo.vision.photo_model import build_photo_model
     from photoservo.vision.rig import load_rig
     from photoservo.vision.frame_reader import LatestFrameReader

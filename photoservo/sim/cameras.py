@@ -47,7 +47,11 @@ class FrameBuffer:
     session's loop reads: `create` makes the file (in /dev/shm where there is one), `attach`
     maps it in the other process, `unlink` removes its name once both have it mapped (the
     mapping lives on until both close it; a killed session leaves no file behind after that).
-    `images` are the (H, W, 3) uint8 views of the left and right image."""
+    `images` are the (H, W, 3) uint8 views of the left and right image. Not the standard library's
+    multiprocessing.shared_memory.SharedMemory: on Python 3.11 its resource tracker registers the
+    segment in the attaching process too and unlinks it (with a warning) when either exits
+    (`track=False` arrives in 3.13); a named file that is unlinked once both have mapped it has
+    neither problem."""
 
     def __init__(self, path: str, sizes: tuple[tuple[int, int], tuple[int, int]]) -> None:
         self.path, self.sizes = path, sizes

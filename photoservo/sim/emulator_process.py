@@ -25,7 +25,7 @@ from photoservo.robot.clock import start_child
 from photoservo.robot.pa10 import N_JOINTS, PA10Limits
 from photoservo.sim.emulator import Bridge, Emulator, EmulatorParams
 
-#: SCHED_FIFO priority of the emulator process: above the control process's (see servo/session.py)
+#: SCHED_FIFO priority of the emulator process: above the control process's (see servo/realtime.py)
 EMULATOR_RT_PRIORITY = 30
 _SLOTS = 1 + 1 + 2 * N_JOINTS + 2  # seq, t, q, dq, status, fault
 

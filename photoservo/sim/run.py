@@ -31,8 +31,9 @@ from photoservo.servo.control import desired_camera_pose
 from photoservo.servo.controller import left_centre
 from photoservo.servo.scores import Scores, Truth
 from photoservo.servo.warm import warm_start
+from photoservo.servo.realtime import run_realtime
 from photoservo.servo.session import ControlLoop, Frame, Status, StatusFn, controller_for, control_tick, \
-    log_tick, run_realtime, vision_step
+    log_tick, vision_step
 from photoservo.sim.arm import LockstepArm
 from photoservo.sim.cameras import SimCameras, SimCamerasConfig
 from photoservo.sim.scenes import synthetic_rig
