@@ -31,14 +31,13 @@ from collections.abc import Callable
 
 import numpy as np
 
-from photoservo.robot.pa10 import CAPSULE_ENDS, DH_D_MM, fk_frames
+from photoservo.robot.pa10 import DH_D_MM, fk_frames, link_capsules
 from photoservo.servo.braking import stopping_speed
 
 #: `Keepout.features`' rows: the moving capsule ends, the rig box corners, the tool point (last,
 #: as servo/motion.py's tool-speed cap reads it)
 FEATURES = ("elbow", "wrist", "flange", *(f"camera rig box corner {i + 1}" for i in range(8)), "tool")
 _MOVED_BY = np.array([3, 5, 7, *(7,) * 8, 7])  # joints 1..n move each feature
-_MOVING_ENDS = np.array(CAPSULE_ENDS[1:])  # fk_frames indices of the elbow, wrist and flange capsule ends
 MIN_STEP_S = 1e-4  # shortest interval the continuous check halves down to (s)
 
 
@@ -78,7 +77,7 @@ class Keepout:
 
     def points(self, F: np.ndarray) -> np.ndarray:
         """`features` from the link frames F (N, 8, 4, 4) of `fk_frames`."""
-        ends = F[:, _MOVING_ENDS][..., :3, 3]  # (N, 3, 3): link_capsules less the fixed shoulder end
+        ends = link_capsules(F)[:, 1:]  # (N, 3, 3): the shoulder end is fixed
         flange = F[:, -1, :3]  # (N, 3, 4)
         tool = (flange @ self.tool_h)[:, None, :]
         corners = (flange @ self.corners_h.T).transpose(0, 2, 1)  # (N, 8, 3)
