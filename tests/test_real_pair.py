@@ -136,3 +136,22 @@ def test_estimate_finds_the_tank_and_no_wrong_object(cases):
             uv = project_points(est.position_mm, c.rig.left)
             x, y, w, h = tr["box_px"]
             assert x <= uv[0] <= x + w and y <= uv[1] <= y + h, (c.target, uv)
+
+
+def test_estimate_finds_the_thin_fender_at_full_size():
+    """The fender (a thin curved shell) cut from the left image, at full size: found, at its depth
+    and size. The choice among candidates compares each with the same model at its apparent
+    size anywhere in the volume (vision/detection.py `standing`): a fit shrunk onto a small red
+    spot at another depth stood above the fender when compared only with its own depth, where
+    nothing else is red."""
+    from photoservo.vision.estimator import estimate
+
+    c, = real_cases(CFG.photo_model, targets=("fender",), variants=("left",))
+    est = estimate(c.model, c.left, c.right, c.rig, CFG.ga, CFG.estimator, CFG.fitness, seed=0)
+    tr = c.truth
+    assert est.found
+    x, y, w, h = tr["box_px"]
+    uv = project_points(est.position_mm, c.rig.left)
+    assert x <= uv[0] <= x + w and y <= uv[1] <= y + h
+    assert abs(est.position_mm[2] / tr["distance_mm"] - 1) < 0.05
+    assert abs(tr["alpha_px_per_mm"] / est.alpha_px_per_mm - 1) < 0.15

@@ -15,10 +15,14 @@ and found = contrast >= min_contrast, beside the outline check (few outer points
 A brighter, darker or colour-cast copy of a pair moves S and q together.
 
 Candidates of different scales are compared by their `standing`: the same formula against what
-a search of the whole pair at the candidate's scale would find where the creature is not — the
-null's (1 - 1/n) quantile, n the number of places the model fits in the image without overlap
-(`placements`). A model shrunk to a few pixels fits thousands of places and some small spot of
-its colour somewhere; the creature's own scale fits a few dozen.
+a search of the whole pair at the candidate's apparent scale would find where the creature is
+not — the (1 - 1/n) quantile, n the number of places the model fits in the image without overlap
+(`placements`), of a second null whose placements keep the candidate's apparent size but take any
+depth of the search volume (a search meets the model at every depth; at the candidate's own
+depth alone, a small fit on a spot of the colour far behind the creature finds nothing else red
+and looked better than the creature, whose depth holds more of its colour). A model shrunk to a
+few pixels fits thousands of places and some small spot of its colour somewhere; the creature's
+own scale fits a few dozen.
 """
 
 from __future__ import annotations
@@ -55,14 +59,17 @@ def confidence(contrast: float, params: EstimatorParams) -> float:
 
 
 def null_scores(c: Candidate, model: PhotoModel, frame: StereoHue, rig: Rig, fit_params: FitnessParams,
-                rng: np.random.Generator, placements: int = 40, jitters: int = 6) -> tuple[np.ndarray, np.ndarray]:
+                rng: np.random.Generator, placements: int = 40, jitters: int = 6,
+                depths_mm: tuple[float, float] | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Detection scores (fitness, cameras combined by min) of the candidate's model where the
     candidate is not: `placements` poses at the candidate's depth, tilt and alpha with the model
     origin at random pixels of the left image at least one apparent model length (at most 0.4 of
     the image's shorter side) away from the candidate's and inside the right image too, any heading; each the best of `jitters` variants (origin within a fifth of the
     length, heading +- 20 deg, alpha +- 10 %). Returns the (placements,) scores and the shares of
     outer points on target hue at every variant (`outer_share`); empty when the image has no room
-    off the candidate."""
+    off the candidate. `depths_mm` (near, far): each placement at its own depth instead (inverse
+    depth uniform between them) with alpha scaled to keep the candidate's apparent size — the
+    model as a search of the pair at the candidate's apparent scale meets it anywhere in depth."""
     strict = dataclasses.replace(fit_params, combine="min")
     K = rig.left.K
     t = np.asarray(c.position_mm, float)
@@ -74,24 +81,28 @@ def null_scores(c: Candidate, model: PhotoModel, frame: StereoHue, rig: Rig, fit
     m = 0.5 * min(length, 0.8 * min(W, H))
     uv = rng.uniform([m, m], [max(m + 1, W - m), max(m + 1, H - m)], size=(8 * placements, 2))
     # off the footprint; a model too large for that (longer than ~0.4 of the image) at least that far
-    uv = uv[np.hypot(uv[:, 0] - u0, uv[:, 1] - v0) >= min(length, 0.4 * min(W, H))]
+    far = np.hypot(uv[:, 0] - u0, uv[:, 1] - v0) >= min(length, 0.4 * min(W, H))
+    zs = np.full(len(uv), z)
+    if depths_mm is not None:
+        zs = 1.0 / rng.uniform(1.0 / depths_mm[1], 1.0 / depths_mm[0], len(uv))
     # ...and where the right camera sees it too (near the rig the disparity is large)
-    X = np.column_stack([(uv[:, 0] - K[0, 2]) * z / K[0, 0], (uv[:, 1] - K[1, 2]) * z / K[1, 1], np.full(len(uv), z)])
+    X = np.column_stack([(uv[:, 0] - K[0, 2]) * zs / K[0, 0], (uv[:, 1] - K[1, 2]) * zs / K[1, 1], zs])
     Xr = X @ rig.R.T + rig.T
     Kr = rig.right.K
     ur = Kr[0, 0] * Xr[:, 0] / Xr[:, 2] + Kr[0, 2]
     vr = Kr[1, 1] * Xr[:, 1] / Xr[:, 2] + Kr[1, 2]
-    seen = (ur >= m) & (ur <= rig.right.width - m) & (vr >= m) & (vr <= rig.right.height - m)
-    uv = uv[seen][:placements]
+    seen = far & (ur >= m) & (ur <= rig.right.width - m) & (vr >= m) & (vr <= rig.right.height - m)
+    uv, zs = uv[seen][:placements], zs[seen][:placements]
     if not len(uv):
         return np.zeros(0), np.zeros(0)
     n = len(uv) * jitters
     uv = np.repeat(uv, jitters, axis=0) + rng.uniform(-0.2, 0.2, (n, 2)) * length
+    zs = np.repeat(zs, jitters)
     psi = np.repeat(rng.uniform(-math.pi, math.pi, len(uv) // jitters), jitters) + rng.uniform(-0.35, 0.35, n)
     R = np.asarray(c.R)[None] @ rotation_from_heading_tilt(psi, np.zeros(n), np.zeros(n))
     R = aspect_map(R, np.full(n, c.aspect))
-    pos = np.column_stack([(uv[:, 0] - K[0, 2]) * z / K[0, 0], (uv[:, 1] - K[1, 2]) * z / K[1, 1], np.full(n, z)])
-    alpha = c.alpha * rng.uniform(0.9, 1.1, n)
+    pos = np.column_stack([(uv[:, 0] - K[0, 2]) * zs / K[0, 0], (uv[:, 1] - K[1, 2]) * zs / K[1, 1], zs])
+    alpha = c.alpha * z / zs * rng.uniform(0.9, 1.1, n)
     f = fitness(R, pos, alpha, model, frame, rig, strict)
     return f.reshape(-1, jitters).max(axis=1), outer_share(R, pos, alpha, model, frame, rig, fit_params)
 
@@ -129,9 +140,10 @@ class Detection:
     confidence = logistic((contrast - min_contrast) / confidence_scale)
                  · logistic((max_outer_on_target - outer_on_target) / 0.02).
     `threshold`: the detection score that would just pass in this pair (the tracker's per-frame
-    test). `standing`: (score - q_b) / (1 - q_b) with q_b the null's (1 - 1/n) quantile (at
-    least its median), n = `placements` (module docstring): how the candidate compares with the
-    best a search of this pair at its scale finds elsewhere; candidates are ranked by it."""
+    test). `standing`: (score - q_b) / (1 - q_b) with q_b the (1 - 1/n) quantile of the null at
+    any depth (at least the null's median), n = `placements` (module docstring): how the
+    candidate compares with the best a search of this pair at its apparent scale finds
+    elsewhere; candidates are ranked by it."""
 
     score: float
     null_level: float
@@ -148,14 +160,18 @@ def detect(c: Candidate, model: PhotoModel, frame: StereoHue, rig: Rig, fit_para
     """The detection test of one candidate (see `Detection`); `seed` draws the null placements."""
     strict = dataclasses.replace(fit_params, combine="min")
     score = float(fitness(c.R_model, c.position_mm, c.alpha, model, frame, rig, strict)[0])
-    null, null_outer = null_scores(c, model, frame, rig, fit_params, np.random.default_rng(seed))
+    rng = np.random.default_rng(seed)
+    null, null_outer = null_scores(c, model, frame, rig, fit_params, rng)
+    # the look-elsewhere null of `standing`: the model at its apparent size anywhere in the volume
+    # (a small fit on a spot of the colour far off matches nothing at its own depth elsewhere)
+    wide, _ = null_scores(c, model, frame, rig, fit_params, rng, depths_mm=(p.z_min_mm, p.z_max_mm))
     o_null = min(float(np.median(null_outer)), 0.99) if len(null_outer) else 0.0
     o = float(outer_share(c.R_model, c.position_mm, c.alpha, model, frame, rig, fit_params)[0])
     outer = max(0.0, (o - o_null) / (1.0 - o_null))
     q = float(np.median(null)) if len(null) else 0.0
     q = min(q, 0.99)
     contrast = (score - q) / (1.0 - q)
-    qb = min(float(np.quantile(null, 1.0 - 1.0 / placements(c, model, rig))) if len(null) else 0.0, 0.99)
+    qb = min(float(np.quantile(wide, 1.0 - 1.0 / placements(c, model, rig))) if len(wide) else 0.0, 0.99)
     standing = (score - max(q, qb)) / (1.0 - max(q, qb))
     passed = contrast >= p.min_contrast and outer <= p.max_outer_on_target
     conf = confidence(contrast, p) / (1.0 + math.exp(-(p.max_outer_on_target - outer) / 0.02))
