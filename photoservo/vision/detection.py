@@ -60,7 +60,7 @@ def confidence(contrast: float, params: EstimatorParams) -> float:
 
 def null_scores(c: Candidate, model: PhotoModel, frame: StereoHue, rig: Rig, fit_params: FitnessParams,
                 rng: np.random.Generator, placements: int = 40, jitters: int = 6,
-                depths_mm: tuple[float, float] | None = None) -> tuple[np.ndarray, np.ndarray]:
+                depths_mm: tuple[float, float] | None = None, outer: bool = True) -> tuple[np.ndarray, np.ndarray]:
     """Detection scores (fitness, cameras combined by min) of the candidate's model where the
     candidate is not: `placements` poses at the candidate's depth, tilt and alpha with the model
     origin at random pixels of the left image at least one apparent model length (at most 0.4 of
@@ -69,7 +69,8 @@ def null_scores(c: Candidate, model: PhotoModel, frame: StereoHue, rig: Rig, fit
     outer points on target hue at every variant (`outer_share`); empty when the image has no room
     off the candidate. `depths_mm` (near, far): each placement at its own depth instead (inverse
     depth uniform between them) with alpha scaled to keep the candidate's apparent size — the
-    model as a search of the pair at the candidate's apparent scale meets it anywhere in depth."""
+    model as a search of the pair at the candidate's apparent scale meets it anywhere in depth.
+    `outer` False: the outer shares are not counted (an empty array)."""
     strict = dataclasses.replace(fit_params, combine="min")
     K = rig.left.K
     t = np.asarray(c.position_mm, float)
@@ -104,7 +105,8 @@ def null_scores(c: Candidate, model: PhotoModel, frame: StereoHue, rig: Rig, fit
     pos = np.column_stack([(uv[:, 0] - K[0, 2]) * zs / K[0, 0], (uv[:, 1] - K[1, 2]) * zs / K[1, 1], zs])
     alpha = c.alpha * z / zs * rng.uniform(0.9, 1.1, n)
     f = fitness(R, pos, alpha, model, frame, rig, strict)
-    return f.reshape(-1, jitters).max(axis=1), outer_share(R, pos, alpha, model, frame, rig, fit_params)
+    shares = outer_share(R, pos, alpha, model, frame, rig, fit_params) if outer else np.zeros(0)
+    return f.reshape(-1, jitters).max(axis=1), shares
 
 
 def placements(c: Candidate, model: PhotoModel, rig: Rig) -> float:
@@ -164,7 +166,7 @@ def detect(c: Candidate, model: PhotoModel, frame: StereoHue, rig: Rig, fit_para
     null, null_outer = null_scores(c, model, frame, rig, fit_params, rng)
     # the look-elsewhere null of `standing`: the model at its apparent size anywhere in the volume
     # (a small fit on a spot of the colour far off matches nothing at its own depth elsewhere)
-    wide, _ = null_scores(c, model, frame, rig, fit_params, rng, depths_mm=(p.z_min_mm, p.z_max_mm))
+    wide, _ = null_scores(c, model, frame, rig, fit_params, rng, depths_mm=(p.z_min_mm, p.z_max_mm), outer=False)
     o_null = min(float(np.median(null_outer)), 0.99) if len(null_outer) else 0.0
     o = float(outer_share(c.R_model, c.position_mm, c.alpha, model, frame, rig, fit_params)[0])
     outer = max(0.0, (o - o_null) / (1.0 - o_null))
