@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 from photoservo.robot import protocol as P
+from photoservo.robot.clock import WindowMin
 from photoservo.sim.emulator import Emulator, EmulatorParams
 from photoservo.robot.link import Link, LinkError, LinkParams
 from photoservo.robot.pa10 import HOME_Q, fk, load_limits
@@ -518,3 +519,19 @@ def test_a_stalled_emulator_process_catches_its_arm_up():
     before, after = lag[t_s < stalled[0]], lag[t_s >= stalled[0] + 0.06]
     step = 0.5 * LIMITS.dq_max[0] * T  # one period of travel at the stream's speed
     assert after.max() <= before.max() + 5 * step, (before.max() / step, after.max() / step)
+
+
+@pytest.mark.parametrize("n", [1, 2, 7, 512])
+def test_clock_offset_window_min_is_the_least_of_the_last_n(n):
+    """The link's bridge-clock offset (`WindowMin`): at every report, the least receive delay of
+    the last n, as a plain min over them gives; through ties, steps and a clear()."""
+    rng = np.random.default_rng(n)
+    delays = np.concatenate([rng.normal(1e-3, 2e-4, 900), np.full(50, 5e-4), rng.normal(3e-3, 1e-3, 900),
+                             np.round(rng.normal(0.0, 2.0, 300))])  # the last: many ties
+    w = WindowMin(n)
+    for k, d in enumerate(delays):
+        assert w.add(float(d)) == delays[max(0, k - n + 1):k + 1].min()
+    w.clear()
+    assert w.add(9.0) == 9.0 and w.add(10.0) == (9.0 if n > 1 else 10.0)
+    with pytest.raises(ValueError):
+        WindowMin(0)

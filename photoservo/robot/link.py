@@ -21,6 +21,7 @@ Times are `time.monotonic()` seconds on the host; joints in radians.
 
 from __future__ import annotations
 
+import math
 import threading
 import time
 from collections import deque
@@ -31,6 +32,7 @@ import serial
 
 from photoservo.robot import protocol as P
 from photoservo.robot.arm import Arm, JointHistory
+from photoservo.robot.clock import WindowMin
 from photoservo.robot.link_quality import BAD, REFUSED, WATCHDOG, LinkQuality, QualityWindow, report_events
 from photoservo.robot.link_types import JointState, LinkError, LinkParams, LinkQualityError, describe_nack  # noqa: F401
 from photoservo.robot.pa10 import fk
@@ -72,7 +74,9 @@ class Link(Arm):
         self._replies: dict[int, P.Message] = {}
         self._history: deque[JointState] = deque()
         self._joints = JointHistory(params.history_s)  # the same states, for state_at
-        self._offsets: deque[float] = deque(maxlen=512)
+        # host = bridge + offset, the offset the least (t_rx - t_bridge) of the last 512 reports
+        # (the least-delayed one; the ~2 s window follows slow drift)
+        self._offsets = WindowMin(512)
         self._error: LinkError | None = None
         self._quality = QualityWindow(params.quality_window_s)
         self._quality_error: LinkQualityError | None = None
@@ -430,21 +434,15 @@ class Link(Arm):
                                         f"itself (watchdog). {advice}.")
             self._cond.notify_all()
 
-    def _clock_offset(self, t_rx: float, t_bridge: float) -> float:
-        """Bridge clock -> host clock: host = bridge + offset, offset = min over recent reports
-        of (t_rx - t_bridge) (the least-delayed report; ~2 s window follows slow drift)."""
-        self._offsets.append(t_rx - t_bridge)
-        return min(self._offsets)
-
     def _on_frame(self, frame: P.Frame, t_rx: float) -> None:
         m = frame.msg
         if self.decoder.frames == 1:
             self._errors_at_sync = self.decoder.errors
         with self._cond:
-            if isinstance(m, P.StateReport) and not np.all(np.isfinite(m.q + m.dq)):
+            if isinstance(m, P.StateReport) and not all(map(math.isfinite, m.q + m.dq)):
                 self._quality.add(t_rx, BAD)  # a bridge fault, not a state: counted, never used
             elif isinstance(m, P.StateReport):
-                off = self._clock_offset(t_rx, m.t_bridge_us * 1e-6)
+                off = self._offsets.add(t_rx - m.t_bridge_us * 1e-6)  # bridge clock -> host clock
                 s = JointState(m.t_bridge_us * 1e-6 + off, t_rx, np.array(m.q), np.array(m.dq),
                                P.Status(m.status), P.Fault(m.fault) if m.fault in P.Fault._value2member_map_
                                else P.Fault.INTERNAL, m)

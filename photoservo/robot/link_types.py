@@ -56,7 +56,7 @@ class JointState:
     """A state report as the host knows it.
 
     t: bridge measurement time on the host clock (s): t_bridge mapped by the smallest observed
-       receive delay (see `Link._clock_offset`), so line and thread-wakeup jitter drop out.
+       receive delay of the last 512 reports (`Link._offsets`), so line and thread-wakeup jitter drop out.
     t_rx: host monotonic time the report was decoded (s).
     q, dq: joint positions (rad) and velocities (rad/s).
     """
