@@ -218,3 +218,18 @@ def test_choose_takes_estimates_answer_without_a_track_and_the_tracks_size_neare
     # a track of alpha 2.0 predicted at x = 120: the size rules out the nearer alpha-3 candidate
     assert choose(ranked, np.eye(4), 2.0, np.array([120.0, 0.0, 600.0]), 0.15)[1].position_mm[0] == 300.0
     assert choose(ranked, np.eye(4), 2.9, np.array([120.0, 0.0, 600.0]), 0.15)[1].position_mm[0] == 100.0
+
+
+def test_a_first_answer_failing_its_confirmation_leaves_the_tracker_acquiring(sim, monkeypatch):
+    """Live under load the first whole-volume search ends on a newer frame and its answer may
+    fail the confirmation there: the tracker, with no track before, is acquiring again (no
+    tracking search around nothing: that crashed the next frame, `t - None`), then finds it."""
+    cfg, s = sim
+    tr = _tracker(cfg, s)
+    monkeypatch.setattr(tr, "_confirm", lambda *a, **k: (None, None, 0))
+    tracks = _run(tr, cfg, s, 0.0, 12)
+    assert all(tk.status == "acquiring" and tk.T_base_model is None for tk in tracks)
+    assert tr.search is None
+    monkeypatch.undo()
+    tracks = _run(tr, cfg, s, 12 / 30, 12)
+    assert tracks[-1].status == "tracking" and _err(tracks[-1], s, 23 / 30) < 15.0

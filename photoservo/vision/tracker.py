@@ -326,8 +326,9 @@ class Tracker:
     def _miss(self, t: float, T_left_base: np.ndarray) -> None:  # status of a frame without measurement
         self.misses += 1
         T_pred = self.predict(t)
-        if T_pred is None:
+        if T_pred is None:  # no track (e.g. a whole-volume answer that failed its confirmation)
             self.status = "acquiring"
+            self.search = None  # nothing to search around: the whole volume is searched
         elif not self._in_view(T_left_base @ T_pred):
             self.status = "out_of_view"  # the predicted creature left the view: never a pose
             self.search = None  # the whole volume is searched for its return
