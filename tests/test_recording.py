@@ -549,3 +549,19 @@ def test_a_file_cut_inside_a_message_is_read_up_to_its_last_complete_message(tmp
     n = len(r.images)
     assert 3 <= n < 12 and [f.index for f in r.images] == list(range(n))
     assert all(np.array_equal(f.left, frame_pair(f.index)[0]) for f in r.images)
+
+
+def test_setup_logged_after_a_batch_was_written_is_the_one_read(tmp_path: Path, monkeypatch):
+    """The run info is logged at open (no seed yet) and again by log_static_setup; when the
+    batcher wrote the first in a chunk of its own (setup more than BATCH_S later: a loaded
+    machine, a recorder process warming its kernels) the later one is read."""
+    import photoservo.record.recorder as recorder
+
+    monkeypatch.setattr(recorder, "BATCH_S", 0.05)
+    path = tmp_path / "late.rrd"
+    with Recorder.open(path, "track", mode="compact", video="none") as rec:
+        time.sleep(0.3)
+        rec.log_static_setup(None, None, None, CONFIG_TOML, seed={"tracker": 5})
+        rec.log_frame(0, 0.0, *frame_pair(0))
+    s = read_recording(path).setup
+    assert s.seed == {"tracker": 5} and s.config_toml == CONFIG_TOML

@@ -395,7 +395,7 @@ def read_recording(path: str | Path, *, images: bool = False) -> Recording:
         frame, t = _times(rb)
         n = rb.num_rows
         if ep in (L.E_RUN, L.E_RIG_TOML, L.E_CONFIG, L.E_WARNING):
-            texts.setdefault(ep, _scalar(rb, "TextDocument:text", n - 1))
+            texts[ep] = _scalar(rb, "TextDocument:text", n - 1)  # static: the last one logged holds
         elif ep == L.E_PHOTO and photo is None and "EncodedImage:blob" in rb.schema.names:
             photo = _decode_image(rb, n - 1)
         elif ep == L.E_MODEL and model is None:
