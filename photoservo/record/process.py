@@ -244,6 +244,10 @@ def _serve(conn, free, args: dict) -> None:
     except Exception as e:  # noqa: BLE001 - reported to the session, which raises it
         conn.send(("error", f"{type(e).__name__}: {e}"))
         return
+    # the arm's drawing (`drawing.Drawing.arm`) runs the kinematics kernel: loaded now (~1 s of
+    # CPU), while the session warms its own, not at its first drawing inside the session
+    from photoservo.servo.warm import warm_kinematics
+    warm_kinematics()
     conn.send(("ready", str(rec.path)))
     ring: SharedArrays | None = None
     failed = False
