@@ -457,7 +457,10 @@ def test_arm_samples_from_a_control_thread_are_all_written_in_degrees(tmp_path: 
     assert np.allclose(np.sort(q_deg.reshape(-1, 7)[:, 0]), np.degrees(np.arange(n) * 1e-3))
 
 
-def test_projected_points_and_desired_pose_are_drawn(tmp_path: Path):
+@pytest.mark.parametrize("given", [True, False])
+def test_projected_points_and_desired_pose_are_drawn(tmp_path: Path, given: bool):
+    """Given a projection, or (as the session logs) projected by the recorder itself from the
+    estimate's pose with the setup's photo-model and rig: the same points."""
     from rerun.chunk import RrdReader
 
     from photoservo.record.drawing import DRAW_POINTS
@@ -472,7 +475,7 @@ def test_projected_points_and_desired_pose_are_drawn(tmp_path: Path):
         est = Estimate(found=True, position_mm=p, rotation=R, alpha_px_per_mm=alpha,
                        size_mm=model.size_mm(alpha), fitness=0.7, generations=9, seconds=0.02,
                        confidence=0.9)
-        rec.log_estimate_of(0, 0.0, est, projection=proj)
+        rec.log_estimate_of(0, 0.0, est, projection=proj if given else None)
         rec.log_desired(0.0, np.eye(4), frame=0)
     assert verify_rrd(path)[0]
     pts = {}

@@ -60,11 +60,14 @@ class Drawing:
         self.arm_drawn_t = -math.inf
         self.path_pts: deque[tuple[float, np.ndarray]] = deque()
         self.path_last_t = -math.inf
+        self.model_: Any = None   # the photo-model and rig of the setup (`model`, `rig`)
+        self.rig_: Any = None
 
     # --- static ----------------------------------------------------------------------------
 
     def rig(self, rig: Any) -> None:
         """Both cameras' Pinholes (RDF) and the right camera's place: X_right = R X_left + T."""
+        self.rig_ = rig  # projects the estimates' model points (`projection`)
         for side, cam in (("left", rig.left), ("right", rig.right)):
             self.rec._log_static(L.E_CAM[side], rr.Pinhole(
                 image_from_camera=cam.K, resolution=list(cam.size), camera_xyz=rr.ViewCoordinates.RDF,
@@ -80,6 +83,7 @@ class Drawing:
 
     def model(self, model: Any) -> None:
         """The PhotoModel's arrays (bit-exact npz) and its points drawn on the photo."""
+        self.model_ = model  # projected at the estimates' poses (`projection`)
         self.rec._log_static(L.E_MODEL, rr.AnyValues(npz=L.blob(pack_model(model)), type=type(model).__name__))
         o = np.asarray(model.origin_px, dtype=np.float64)
         self.rec._log_static(f"{L.E_PHOTO}/inner", rr.Points2D(np.asarray(model.inner_uv) + o,
@@ -115,13 +119,20 @@ class Drawing:
             parts.append(rr.Boxes3D(half_sizes=[[w / 2, h / 2, 1.0]], colors=[color]))
         self.rec._log(entity, t, frame, *parts)
 
-    def projection(self, t: float, frame: int, found: bool, projection: Any) -> None:
+    def projection(self, t: float, frame: int, found: bool, projection: Any,
+                   pose: tuple[np.ndarray, np.ndarray, float] | None = None) -> None:
         """The best model's projected points on each image, inner and outer (colours and radii
         static, per frame the positions only), at most DRAW_POINTS of each (evenly strided: a
         picture of the pose, whose exact numbers are in data/estimate); cleared when not found;
-        only when `due`."""
+        only when `due`. Without a `projection`, the points are projected here from `pose` (R,
+        position_mm in the left camera, alpha) with the recorded photo-model and rig: only the
+        frames drawn pay for it, and not the session's loop."""
         if not self.due(frame, t):
             return
+        if projection is None and found and pose is not None and self.model_ is not None and self.rig_ is not None:
+            from photoservo.vision.fitness import project_model
+            R, position_mm, alpha = pose
+            projection = project_model(R[None], position_mm[None], np.array([alpha]), self.model_, self.rig_)
         for side in L.SIDES:
             if not (found and projection is not None):
                 self.rec._log(L.E_POINTS[side], t, frame, rr.Clear(recursive=True))

@@ -405,7 +405,9 @@ class Recorder:
         """The tracker's best individual for a frame: pose "model in left camera"
         (X_left = R X_model + position_mm), alpha (px/mm), size_mm, fitness, found.
         projection: its projected points (`vision.fitness.ModelProjection`), drawn on the
-        images when given. T_base_left places the model in the base frame (3-D view, truth)."""
+        images; when not given they are projected from R, position_mm and alpha with the
+        photo-model and rig of `log_static_setup`, on the frames drawn only. T_base_left places
+        the model in the base frame (3-D view, truth)."""
         self._check()
         self._start()
         self._last_t = t
@@ -429,7 +431,8 @@ class Recorder:
             self.draw.box("world/target/estimate", t, frame, T_base_model, size_mm, [255, 140, 0])
         elif self.draw.due(frame, t):
             self._log("world/target/estimate", t, frame, rr.Clear(recursive=False))
-        self.draw.projection(t, frame, found, projection)
+        self.draw.projection(t, frame, found, projection,
+                             (R, position_mm, alpha) if posed and alpha is not None else None)
         self._log(L.E_DATA_EST, t, frame, rr.AnyValues(values=L.pack(L.EST_LAYOUT, {
             "found": float(bool(found)), "fitness": fitness, "generations": generations,
             "alpha": alpha if posed else None, "rotation": R if posed else None,

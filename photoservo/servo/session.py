@@ -27,7 +27,7 @@ from photoservo.robot.arm import Arm
 from photoservo.servo.controller import Controller, Phase, left_centre, search_joints
 from photoservo.servo.motion import Motion
 from photoservo.servo.scores import Scores, Truth
-from photoservo.vision.fitness import StereoHue, project_model, stereo_hue
+from photoservo.vision.fitness import StereoHue, stereo_hue
 from photoservo.vision.rig import Rig
 from photoservo.vision.tracker import Track, Tracker
 
@@ -122,23 +122,19 @@ def vision_step(fr: Frame, tracker: Tracker, cfg: Config, sc: Scores, recorder, 
         sc.score_track(truth, fr.T_base_left, fr.t_left, track.status,
                        None if track.T_base_model is None else track.T_base_model[:3, 3])
     if recorder is not None:
-        _record_frame(recorder, fr, hue, track, tracker, truth, sc, {"hue": 1e3 * (c1 - c0), "ga": 1e3 * (c2 - c1)})
+        _record_frame(recorder, fr, hue, track, truth, sc, {"hue": 1e3 * (c1 - c0), "ga": 1e3 * (c2 - c1)})
     return track
 
 
-def _record_frame(recorder, fr: Frame, hue: StereoHue, track: Track, tracker: Tracker, truth: Truth | None,
+def _record_frame(recorder, fr: Frame, hue: StereoHue, track: Track, truth: Truth | None,
                   sc: Scores, timings: dict[str, float]) -> None:
     c3 = time.perf_counter()
     recorder.log_frame(fr.index, fr.t_left, fr.left, fr.right, T_base_left=fr.T_base_left,
                        capture_times=(fr.t_left, fr.t_right), fitness_input=hue)
-    proj = None
-    if track.R_left is not None:
-        proj = project_model(track.R_left[None], track.t_left[None], np.array([track.alpha_measured]),
-                             tracker.model, tracker.rig)
+    # the projected model points are drawn by the recorder (at the video's rate, from its model and rig)
     recorder.log_estimate(fr.index, fr.t_left, found=track.found, fitness=track.fitness,
                           R=track.R_left, position_mm=track.t_left, alpha=track.alpha_measured,
-                          size_mm=track.size_mm, generations=track.generations,
-                          T_base_left=fr.T_base_left, projection=proj)
+                          size_mm=track.size_mm, generations=track.generations, T_base_left=fr.T_base_left)
     if truth is not None:
         recorder.log_truth(fr.index, fr.t_left, truth.motion.pose(fr.t_left), truth.size_mm)
     sc.time("record", 1e3 * (time.perf_counter() - c3))
