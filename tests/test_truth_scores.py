@@ -101,6 +101,8 @@ def test_tracking_holds_at_3_fps_with_two_generations_a_frame():
     assert first <= 3 and after.count("tracking") >= 0.85 * len(after) and s["found_ratio"] >= 0.8, (after, s)
     assert s["false_tracks"] == 0 and s["track_error_mm"]["p95"] <= 45.0, s
     assert sc.truth_frames[first].error_mm <= 20.0, s  # the confirmed answer, not the 2-s-old one
+    # the servo law got it when the frame's processing ended, not before the frame was taken
+    assert sc.truth_frames[first].t <= s["first_track_s"] <= sc.truth_frames[first].t + 1.0, s
 
 
 def test_under_load_a_creature_drifting_out_of_view_is_out_of_view_not_lost():
@@ -117,3 +119,18 @@ def test_under_load_a_creature_drifting_out_of_view_is_out_of_view_not_lost():
     gone = [f for f in sc.truth_frames if f.in_view < 0.2]
     assert gone and all(f.status == "out_of_view" for f in gone), [(f.t, f.status, f.in_view) for f in sc.truth_frames]
     assert sum(f.status == "tracking" for f in sc.truth_frames if f.in_view >= 0.6) >= 3, s
+
+
+def test_the_summary_says_when_a_busy_machine_may_have_cost_the_track():
+    """`track` without --json: one line when under half the frames found the creature while the
+    load average exceeded the CPU count (when the first track came, or that none did); nothing
+    when the run found it or the machine was not busy."""
+    from photoservo.cli.track import _busy_note
+
+    run = {"found_ratio": 0.03, "first_track_s": 2.87, "load_average": 9.3}
+    note = _busy_note(run, cpus=2)
+    assert note is not None and "load average 9.3 on 2 CPUs" in note and "came 2.9 s into the session" in note
+    assert "never came" in _busy_note({**run, "first_track_s": None}, cpus=2)
+    assert _busy_note({**run, "found_ratio": 0.98}, cpus=2) is None
+    assert _busy_note({**run, "load_average": 1.5}, cpus=2) is None
+    assert "\n" not in note

@@ -30,6 +30,7 @@ import argparse
 import dataclasses
 import logging
 import math
+import os
 import sys
 from pathlib import Path
 
@@ -224,12 +225,15 @@ def _report(args, sc, rec, cfg, status) -> int:
         rec = None
     if rec is not None and rec.written:
         s["recording"] = _recording_files(rec)
+    s["load_average"] = round(os.getloadavg()[0], 2)  # the 1-minute load at the end: what the run competed with
     if args.json:
         print(dumps_strict(s))
     else:
         t = s["timings_ms_median"]
         print(f"frames {s['frames']}, found {100 * s['found_ratio']:.0f} %, lost {s['lost_events']}, "
               f"acquisitions {s['acquisitions']}")
+        if (note := _busy_note(s, os.cpu_count() or 1)) is not None:
+            print(note)
         if args.collect:
             print(f"collection: {_collection(s, cfg, status)}")
         if not math.isnan(s["hold_error_rms_mm"]):
@@ -246,6 +250,19 @@ def _report(args, sc, rec, cfg, status) -> int:
         if rec is not None and rec.written:
             print(f"recording: {_recording_files(rec)}")
     return EXIT_HARDWARE if s["faults"] else 0
+
+
+def _busy_note(s: dict, cpus: int) -> str | None:
+    """The summary's line for a session that found the creature in under half its frames on a
+    busy machine (1-minute load average above the CPU count): when the first track came, and why
+    that can lose a drifting creature. None otherwise."""
+    if s["found_ratio"] >= 0.5 or s["load_average"] <= cpus:
+        return None
+    first = "never came" if s.get("first_track_s") is None else f"came {s['first_track_s']:.1f} s into the session"
+    return (f"note: the machine was busy (load average {s['load_average']:.1f} on {cpus} CPUs) and the first "
+            f"track {first}: the first whole-volume search then takes seconds, and a drifting creature "
+            "can leave the still arm's view before it ends (README: Tracking, on a busy machine). "
+            "Close other programs and run again.")
 
 
 def _recording_files(rec) -> str | None:

@@ -291,6 +291,7 @@ def run_realtime(cfg: Config, duration_s: float, *, port: str, read_frame: Calla
             track = vision_step(fr, tracker, cfg, sc, recorder, truth, events)
             if not control.send(replace(track, t=track.t + t0)):  # the control process reads monotonic time
                 break  # it has ended (its report says why)
+            sc.note_delivery(time.monotonic() - t0, track.status)
             for t_e, text in events:
                 if recorder is not None:
                     recorder.event(t_e, text)

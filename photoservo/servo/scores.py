@@ -229,6 +229,7 @@ class Scores:
     distractor_min_mm: float = float("inf")  # closest the rig centre came to the look-alike (horizontal)
     dropped_frames: int = 0  # frames with no arm state at their capture time
     last_status: str | None = None
+    first_track_s: float | None = None  # session time the servo law got its first tracking estimate (s)
     truth_frames: list[TruthFrame] = field(default_factory=list)  # simulation: each frame against the truth
 
     def time(self, stage: str, ms: float) -> None:
@@ -243,6 +244,12 @@ class Scores:
             self.lost_events += status == "lost"
             self.last_status = status
         return changed
+
+    def note_delivery(self, t: float, status: str) -> None:
+        """The servo law got a track of `status` at session time t (s): the first tracking one
+        is `first_track_s` (on a busy machine the first search can outlast the creature's stay)."""
+        if status == "tracking" and self.first_track_s is None:
+            self.first_track_s = t
 
     def score_track(self, truth: Truth, T_base_left: np.ndarray, t: float, status: str,
                     p_estimate: np.ndarray | None) -> TruthFrame:
@@ -288,6 +295,7 @@ class Scores:
             "collected": self.collected, "faults": list(self.faults),
             "timings_ms_median": {k: float(np.median(v)) for k, v in self.timings_ms.items()},
             "distractor_min_mm": self.distractor_min_mm, "final_status": self.last_status,
+            "first_track_s": self.first_track_s,
             **({"track_error_mm": track_error_summary(self.truth_frames),
                 "track_error_partial_mm": track_error_summary(self.truth_frames, partial=True),
                 "false_tracks": false_tracks(self.truth_frames), "reacquisition_s": reacquisition_s(self.truth_frames)}

@@ -136,6 +136,7 @@ def run_lockstep(cfg: Config, duration_s: float, *, collect: bool = False, no_mo
             k += 1
         while in_flight and in_flight[0].t_delivery <= now + 1e-9:
             track = vision_step(in_flight.pop(0), tracker, cfg, sc, recorder, sim.truth, c.ctrl.events)
+            sc.note_delivery(now, track.status)
         st = arm.state()
         c0 = time.perf_counter()
         tick = control_tick(c, now, st.t, st.q, st.dq, track)
