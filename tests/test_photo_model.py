@@ -297,3 +297,32 @@ def test_hue_image_is_the_hsv_hue_with_no_hue_below_the_floors_for_every_colour(
     hsv = cv2.cvtColor(bgr, cv2.COLOR_BGR2HSV)
     want = np.where((hsv[..., 1] < min_s) | (hsv[..., 2] < min_v), NO_HUE, hsv[..., 0])
     assert np.array_equal(hue_image(bgr, min_s, min_v), want)
+
+
+def test_a_small_photo_keeps_its_outline_in_proportion():
+    """The outer band is at most band_frac of the target's longest side: a target cut small (141
+    px long) and the same cut at half size give models whose outer points stay within that
+    fraction and whose ratio of outer to inner points is about the same (0.57 and 0.49; with the
+    fixed 12 px band 0.61 and 1.27: the half-size outline would outweigh its body); a large photo
+    (the simulator's 150-260 px creatures) keeps band_px."""
+    photo = np.full((200, 260, 3), 245, np.uint8)
+    cv2.ellipse(photo, (130, 100), (70, 30), 0, 0, 360, (40, 60, 220), -1)
+    small = cv2.resize(photo, (130, 100), interpolation=cv2.INTER_AREA)
+    ratios = []
+    for p, length in ((photo, 141), (small, 71)):
+        m = build_photo_model(p, PARAMS)
+        assert abs(max(m.size_px) - length) <= 2
+        assert reach(m).max() <= PARAMS.band_frac * max(m.size_px) + 1.0
+        ratios.append(len(m.outer_uv) / len(m.inner_uv))
+    assert ratios[1] == pytest.approx(ratios[0], rel=0.25)
+    big = build_photo_model(specimen("squid"), PARAMS)
+    assert PARAMS.band_px - 3 <= reach(big).max() <= PARAMS.band_px + 1
+
+
+def reach(m) -> np.ndarray:
+    """Each outer point's distance (px) from the nearest target pixel of the model's mask."""
+    pad = 40
+    outside = np.pad(m.mask == 0, pad, constant_values=True).astype(np.uint8)
+    dist = cv2.distanceTransform(outside, cv2.DIST_L2, cv2.DIST_MASK_PRECISE)
+    ij = np.rint(m.outer_uv + np.array(m.origin_px)).astype(int) + pad
+    return dist[ij[:, 1], ij[:, 0]]

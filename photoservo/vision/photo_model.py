@@ -27,7 +27,8 @@ class PhotoModelParams:
     """[photo_model] config: how the model is cut out of the photo and sampled."""
 
     interval_px: float  # sampling interval of inner and outer points in the photo (px)
-    band_px: float  # width of the outer band around the target (px)
+    band_px: float  # width of the outer band around the target (px)...
+    band_frac: float  # ...at most this fraction of the target's longest side
     hue_tolerance: int  # hue distance (0..90) that still counts as "the same hue"
     min_saturation: int  # 0..255: below this a pixel carries no hue
     min_value: int  # 0..255: below this a pixel carries no hue
@@ -275,7 +276,10 @@ def build_photo_model(photo_bgr: np.ndarray, params: PhotoModelParams,
     Sampling points lie on one grid of pitch `params.interval_px` anchored at the model origin
     (the centre of the target's bounding rectangle): inner points S_in on the target, each with
     the circular median hue of its small neighbourhood (points whose neighbourhood carries no hue
-    are dropped), and outer points S_out off the target within `params.band_px` of it. Above
+    are dropped), and outer points S_out off the target within `params.band_px` of it, or
+    `params.band_frac` of the target's longest side when that is less (a small photo, such as a
+    target cut from a distant view, would otherwise weigh its outline far above its body:
+    its ratio of outer to inner points would grow as the photo shrinks). Above
     `params.max_points` points the pitch is coarsened until they fit. `target_hues` marks the
     hues of the inner points and of every hue holding >= 1 % of the target's hued pixels,
     widened by `params.hue_tolerance`.
@@ -287,8 +291,9 @@ def build_photo_model(photo_bgr: np.ndarray, params: PhotoModelParams,
     x, y, w, h = cv2.boundingRect(mask)
     origin = (x + (w - 1) / 2.0, y + (h - 1) / 2.0)
     interval = float(params.interval_px)
+    band = min(float(params.band_px), params.band_frac * max(w, h))
     for _ in range(50):
-        pin, hin, pout = _sample(hue, mask, origin, interval, params.band_px)
+        pin, hin, pout = _sample(hue, mask, origin, interval, band)
         if len(pin) + len(pout) <= params.max_points:
             break
         interval *= max(1.02, float(np.sqrt((len(pin) + len(pout)) / params.max_points)))
