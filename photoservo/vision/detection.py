@@ -69,7 +69,8 @@ def null_scores(c: Candidate, model: PhotoModel, frame: StereoHue, rig: Rig, fit
     outer points on target hue at every variant (`outer_share`); empty when the image has no room
     off the candidate. `depths_mm` (near, far): each placement at its own depth instead (inverse
     depth uniform between them) with alpha scaled to keep the candidate's apparent size — the
-    model as a search of the pair at the candidate's apparent scale meets it anywhere in depth.
+    model as a search of the pair at the candidate's apparent scale meets it anywhere in depth —
+    and off the candidate in the right image too (at another depth the two differ).
     `outer` False: the outer shares are not counted (an empty array)."""
     strict = dataclasses.replace(fit_params, combine="min")
     K = rig.left.K
@@ -93,6 +94,10 @@ def null_scores(c: Candidate, model: PhotoModel, frame: StereoHue, rig: Rig, fit
     ur = Kr[0, 0] * Xr[:, 0] / Xr[:, 2] + Kr[0, 2]
     vr = Kr[1, 1] * Xr[:, 1] / Xr[:, 2] + Kr[1, 2]
     seen = far & (ur >= m) & (ur <= rig.right.width - m) & (vr >= m) & (vr <= rig.right.height - m)
+    if depths_mm is not None:  # at another depth, off the candidate in the left image is not off it in the right
+        tr = rig.R @ t + rig.T
+        seen &= np.hypot(ur - (Kr[0, 0] * tr[0] / tr[2] + Kr[0, 2]),
+                         vr - (Kr[1, 1] * tr[1] / tr[2] + Kr[1, 2])) >= min(length, 0.4 * min(W, H))
     uv, zs = uv[seen][:placements], zs[seen][:placements]
     if not len(uv):
         return np.zeros(0), np.zeros(0)
