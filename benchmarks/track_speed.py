@@ -1,11 +1,9 @@
 """Real-time tracking speed (issue 5 item 8, issue 10): per-stage timings of the session loop and
 frames per second end to end, (a) on PRE-RENDERED simulator frames — the product's own cost: hue
-image, tracker (a few GA generations), recording (the Recorder's threads in the loop's process,
-or the recorder in its own process as `track` runs it) — and (b) LIVE, as `photoservo track --sim` runs:
+image, tracker (a few GA generations), recording — and (b) LIVE, as `photoservo track --sim` runs:
 the controller emulator in its own process on a pty behind the real serial link, the control
 process at 250 Hz, the simulator's renderer process, with and without the default recording
-([recording]: compact planes + the AV1 video at 10 frames a second, in the recorder process and
-its encoder process); plus
+([recording]: compact planes + the AV1 video at 10 frames a second in its encoder process); plus
 the control period's lateness (p50, p99, max) and the CPU each process used per frame in (b).
 
 Targets (issue 10): >= 30 frames per second steady WITH the default recording on this 2-core
@@ -31,7 +29,6 @@ import numpy as np
 from photoservo.fileio import write_text_atomic
 from photoservo.robot import pa10
 from photoservo.config import load_config
-from photoservo.record.process import RecorderProcess
 from photoservo.record.recorder import Recorder
 from photoservo.servo.scores import Scores
 from photoservo.servo.session import Frame, vision_step
@@ -41,10 +38,8 @@ from photoservo.vision.tracker import Tracker
 OUT = Path(__file__).resolve().parent / "out" / "track_speed.json"
 
 
-def prerendered(cfg, n_frames: int, record: str | None) -> dict:
-    """Per-stage ms on frames rendered beforehand along the target's drift (cameras following);
-    record: None, "thread" (the Recorder in this process: its threads beside the loop) or
-    "process" (`record.process.RecorderProcess`, as `track` records a real-time session)."""
+def prerendered(cfg, n_frames: int, record: bool) -> dict:
+    """Per-stage ms on frames rendered beforehand along the target's drift (cameras following)."""
     sim = build_sim(cfg)
     T_fl = sim.rig.T_flange_left()
     T0 = pa10.fk(sim.q0) @ T_fl
@@ -58,8 +53,7 @@ def prerendered(cfg, n_frames: int, record: str | None) -> dict:
     tracker = Tracker.from_config(sim.scene.model, sim.rig, cfg, seed=0)
     sc = Scores()
     with tempfile.TemporaryDirectory() as d:
-        make = {None: None, "thread": Recorder.from_config, "process": RecorderProcess.from_config}[record]
-        rec = make(cfg.recording, "bench", Path(d) / "b.rrd") if make is not None else None
+        rec = Recorder.from_config(cfg.recording, "bench", Path(d) / "b.rrd") if record else None
         try:
             walls = []
             for fr in frames:
@@ -123,8 +117,8 @@ class ProcessCPU:
 
 
 def live(cfg, seconds: float, rt_priority: int | None = None, record: bool = True) -> dict:
-    """One `track --sim` session as the CLI runs it (emulator process, default recording in its
-    own process, or none)."""
+    """One `track --sim` session as the CLI runs it (emulator process, default recording or none)."""
+    from photoservo.record.recorder import Recorder
     from photoservo.sim.emulator_process import EmulatorProcess
     from photoservo.sim.run import sim_config
     from photoservo.tomlconf import dump_config
@@ -135,7 +129,7 @@ def live(cfg, seconds: float, rt_priority: int | None = None, record: bool = Tru
     with tempfile.TemporaryDirectory() as d, ProcessCPU() as pc:
         emu = EmulatorProcess(cfg.emulator, sim.limits, q0=sim.q0)
         emu.start()
-        rec = RecorderProcess.from_config(cfg.recording, "track", Path(d) / "t.rrd") if record else None
+        rec = Recorder.from_config(cfg.recording, "track", Path(d) / "t.rrd") if record else None
         try:
             if rec is not None:
                 rec.log_static_setup(dump_rig(sim.rig), sim.scene.photo, sim.scene.model, dump_config(cfg), {"tracker": 0})
@@ -145,8 +139,7 @@ def live(cfg, seconds: float, rt_priority: int | None = None, record: bool = Tru
                 if not cpu0:
                     cpu0.update(pc.cpu)
             sc = run_sim_realtime(cfg, seconds, sim, emu, rt_priority=rt_priority, recorder=rec, status=status)
-            names = ["emulator", "recorder", "renderer", "control", "video encoder"] if record else \
-                ["emulator", "renderer", "control"]
+            names = ["emulator", "renderer", "control", "video encoder"]
             cpu = pc.since(cpu0, names) if cpu0 else {}  # no frame: the session's clock never showed
         finally:
             if rec is not None:
@@ -178,17 +171,14 @@ def main() -> None:
     cfg = load_config()
     load = os.getloadavg()
     n_pre = 0 if a.skip_prerendered else a.repeats
-    runs_pre, runs_thread, runs_rec = [], [], []
-    for _ in range(n_pre):  # alternately
-        runs_pre.append(prerendered(cfg, a.frames, record=None))
-        runs_thread.append(prerendered(cfg, a.frames, record="thread"))
-        runs_rec.append(prerendered(cfg, a.frames, record="process"))
+    runs_pre = [prerendered(cfg, a.frames, record=False) for _ in range(n_pre)]
+    runs_rec = [prerendered(cfg, a.frames, record=True) for _ in range(n_pre)]
     runs_live, runs_live_rec = [], []
     for _ in range(a.repeats):  # alternately, so both see the same machine
         runs_live.append(live(cfg, a.live_s, a.rt_priority, record=False))
         runs_live_rec.append(live(cfg, a.live_s, a.rt_priority, record=True))
     load_end = os.getloadavg()
-    cols = (("pre-rendered", runs_pre), ("+ rec. threads", runs_thread), ("+ rec. process", runs_rec), ("live sim", runs_live),
+    cols = (("pre-rendered", runs_pre), ("+ recording", runs_rec), ("live sim", runs_live),
             ("live + recording", runs_live_rec))
 
     def med(runs, key, sub=None):
@@ -219,8 +209,7 @@ def main() -> None:
         print(f"acquisition from the full volume: {med(runs_pre, 'acquisition_ms'):.0f} ms (first frames)")
     OUT.parent.mkdir(parents=True, exist_ok=True)
     write_text_atomic(OUT, json.dumps({"load_average": load, "load_average_end": load_end, "rt_priority": a.rt_priority,
-                                       "live_s": a.live_s, "prerendered": runs_pre,
-                                       "prerendered_recording_threads": runs_thread, "prerendered_recording": runs_rec,
+                                       "live_s": a.live_s, "prerendered": runs_pre, "prerendered_recording": runs_rec,
                                        "live": runs_live, "live_recording": runs_live_rec}, indent=1, default=float))
     print(f"wrote {OUT}")
 

@@ -185,16 +185,11 @@ def _run_world_from(args: argparse.Namespace) -> int:
     return code
 
 
-def _recorder(args, cfg, realtime: bool = True):
-    """The session's recorder (None: --no-record). A real-time session records from its own
-    process (`record.process`: the loop keeps its interpreter); a lockstep run, which has no
-    clock to keep, in this one."""
+def _recorder(args, cfg):
     if args.no_record:
         return None
-    if realtime:
-        from photoservo.record.process import RecorderProcess as Recorder
-    else:
-        from photoservo.record.recorder import Recorder
+    from photoservo.record.recorder import Recorder
+
     return Recorder.from_config(cfg.recording, "track", args.record, view=args.view, connect_url=args.connect)
 
 
@@ -287,7 +282,7 @@ def _run_sim(args, cfg) -> int:
     status = _StatusLine(args.no_motion)
 
     def session(held: dict):
-        rec = held["rec"] = _recorder(args, cfg, realtime=not cfg.sim.lockstep)
+        rec = held["rec"] = _recorder(args, cfg)
         if rec is not None:
             _setup_static(rec, cfg, sim.rig, sim.scene.photo, sim.scene.model, args.seed, {"sim": cfg.sim.seed})
         if args.lockstep or cfg.sim.lockstep:

@@ -13,7 +13,10 @@ and blocked the renderer until the loop read it.
 
 from __future__ import annotations
 
+import mmap
 import multiprocessing
+import os
+import tempfile
 import threading
 import time
 from collections import deque
@@ -24,7 +27,6 @@ import numpy as np
 
 from photoservo.robot import pa10
 from photoservo.robot.clock import ignore_stop_signals, start_child
-from photoservo.shared_arrays import SharedArrays
 from photoservo.sim.world import SimScene
 from photoservo.vision.sources import StereoSource
 
@@ -40,24 +42,43 @@ class SimCamerasConfig:
     max_skew_s: float = 1.0
 
 
-class FrameBuffer(SharedArrays):
-    """A stereo pair's pixels that the renderer process writes and the session's loop reads
-    (`shared_arrays.SharedArrays`): `create` makes the file, the other process maps it by its
-    path, `unlink` removes the name once both have it mapped. `images` are the (H, W, 3) uint8
-    views of the left and right image."""
+class FrameBuffer:
+    """A stereo pair's pixels in a file mapping that the renderer process writes and the
+    session's loop reads: `create` makes the file (in /dev/shm where there is one), `attach`
+    maps it in the other process, `unlink` removes its name once both have it mapped (the
+    mapping lives on until both close it; a killed session leaves no file behind after that).
+    `images` are the (H, W, 3) uint8 views of the left and right image. Not the standard library's
+    multiprocessing.shared_memory.SharedMemory: on Python 3.11 its resource tracker registers the
+    segment in the attaching process too and unlinks it (with a warning) when either exits
+    (`track=False` arrives in 3.13); a named file that is unlinked once both have mapped it has
+    neither problem."""
 
     def __init__(self, path: str, sizes: tuple[tuple[int, int], tuple[int, int]]) -> None:
-        super().__init__(path, [(h, w, 3) for w, h in sizes])
-        self.sizes = sizes
-
-    @property
-    def images(self) -> list[np.ndarray]:
-        return self.arrays
+        self.path, self.sizes = path, sizes
+        shapes = [(h, w, 3) for w, h in sizes]
+        n = [h * w * 3 for h, w, _ in shapes]
+        with open(path, "r+b") as f:
+            self._map = mmap.mmap(f.fileno(), sum(n))
+        self.images = [np.ndarray(shapes[0], np.uint8, self._map, 0), np.ndarray(shapes[1], np.uint8, self._map, n[0])]
 
     @classmethod
     def create(cls, sizes: tuple[tuple[int, int], tuple[int, int]]) -> "FrameBuffer":
         """A new buffer for images of `sizes` ((w, h) left, right)."""
-        return cls(cls.make_file([(h, w, 3) for w, h in sizes], "photoservo-frames-"), sizes)
+        folder = "/dev/shm" if os.path.isdir("/dev/shm") else None
+        fd, path = tempfile.mkstemp(prefix="photoservo-frames-", dir=folder)
+        with os.fdopen(fd, "wb") as f:
+            f.truncate(sum(w * h * 3 for w, h in sizes))
+        return cls(path, sizes)
+
+    def unlink(self) -> None:
+        try:
+            os.unlink(self.path)
+        except FileNotFoundError:
+            pass
+
+    def close(self) -> None:
+        self.images = []
+        self._map.close()
 
 
 def render_process(make_scene, requests, frames, buffer: tuple[str, tuple]) -> None:
