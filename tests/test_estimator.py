@@ -186,3 +186,42 @@ def test_detection_needs_both_cameras_and_the_outline(scene):
     shrunk = detect(Candidate(R, t, alpha * 1.6, 0.0, 0, "shrunk"), model, frame, sc.rig, CFG.fitness, CFG.estimator)
     assert not shrunk.passed and shrunk.outer_on_target > CFG.estimator.max_outer_on_target
     assert shrunk.confidence < ok.confidence
+
+
+def test_a_passing_candidate_nearly_as_high_goes_before_a_failing_first():
+    """estimator.ranked on hand-made candidates: by standing, but a first that fails detection
+    yields to the best passing one standing at least passed_standing_ratio as high."""
+    from photoservo.vision.detection import Detection
+    from photoservo.vision.estimator import ranked
+    from photoservo.vision.pose_search import Candidate
+
+    def cand(x, passed, standing):
+        d = Detection(score=0.9, null_level=0.2, contrast=standing, outer_on_target=0.0, passed=passed,
+                      confidence=0.9, threshold=0.5, standing=standing)
+        return d, Candidate(np.eye(3), np.array([x, 0.0, 600.0]), 2.0, 0.9, 10, "blob")
+
+    def firsts(results, ratio):
+        return [c.position_mm[0] for _, c in ranked(results, ratio)]
+
+    near = [cand(1.0, True, 0.50), cand(2.0, False, 0.76), cand(3.0, True, 0.64)]  # 0.64 / 0.76 = 0.84
+    assert firsts(near, 0.82) == [3.0, 2.0, 1.0]
+    assert firsts(near, 1.0) == [2.0, 3.0, 1.0]  # 1 = by standing only
+    far = [cand(1.0, True, 0.10), cand(2.0, False, 0.35)]  # 0.29: a badge-sized fit elsewhere stays behind
+    assert firsts(far, 0.82) == [2.0, 1.0]
+    assert firsts([cand(1.0, True, 0.3), cand(2.0, True, 0.6)], 0.82) == [2.0, 1.0]  # first passes: unchanged
+
+
+def test_the_creature_is_found_beside_a_look_alike_that_stands_higher_but_fails():
+    """The accuracy benchmark's renderer scene 1051 (a squid, another individual's photo, a
+    look-alike in view): the look-alike's fit stands highest and fails the outline test; the
+    creature's fit passes and stands 0.84 as high, so it is the estimate."""
+    from photoservo.sim.scenes import EFFECTS
+
+    sc = random_scene(1051, CFG.synthetic, CFG.photo_model, kind="squid", other_photo=True, effects=tuple(EFFECTS),
+                      distractor=True, split=False)
+    model = build_photo_model(sc.photo, CFG.photo_model)
+    est = estimate(model, sc.left, sc.right, sc.rig, CFG.ga, CFG.estimator, CFG.fitness, seed=51)
+    t = np.array(sc.truth["position_mm"])
+    assert est.found and np.linalg.norm(est.position_mm - t) < 0.05 * t[2]
+    by_standing = max(est.candidates, key=lambda c: c["standing"])
+    assert not by_standing["found"] and np.linalg.norm(np.array(by_standing["position_mm"]) - t) > 0.2 * t[2]

@@ -14,7 +14,8 @@ minimum — both must see it — against the pair's own null, and the outline ch
 on target hue). The candidate that stands out most from what a search of this pair finds
 elsewhere at its scale (`Detection.standing`) is the estimate, the others the candidate list,
 and `found` is whether it passed (a fit on a small spot of the target's colour may pass while
-the creature itself stands out more: then the creature is the estimate, or nothing is).
+the creature itself stands out more: then the creature is the estimate, or nothing is) —
+unless it fails and one that passes stands nearly as high (`ranked`).
 
 When the target's hues cover most of the pair (a many-hued creature in water of one of its hues;
 a real scene whose background lies within the hue tolerance of the target), seeds come from the
@@ -78,6 +79,7 @@ class EstimatorParams:
     alpha_tol: float  # ... best alpha changed by less than this fraction
     min_contrast: float  # detection: found = contrast over the pair's own null >= this (vision/detection.py)
     max_outer_on_target: float  # detection also needs at most this share of outer points on target hue
+    passed_standing_ratio: float  # a candidate that passes ranks first when it stands >= this x the top, which fails
     confidence_scale: float  # width of the logistic confidence around min_contrast
 
     def validate(self, where: str) -> None:
@@ -96,6 +98,7 @@ class EstimatorParams:
             ("aspect_max", self.aspect_max >= 1.0, "must be >= 1"),
             ("layout_share", 0.0 <= self.layout_share <= 1.0, "must be in [0, 1]"),
             ("group_reach", self.group_reach >= 0, "must be >= 0"),
+            ("passed_standing_ratio", 0.0 <= self.passed_standing_ratio <= 1.0, "must be in [0, 1]"),
             ("min_generations", 0 <= self.min_generations <= self.max_generations,
              "need 0 <= min_generations <= max_generations"),
             ("patience", self.patience >= 1, "must be >= 1"),
@@ -230,8 +233,22 @@ def acquisition(model: PhotoModel, left_bgr: np.ndarray, right_bgr: np.ndarray, 
     for (name, search), c in zip(islands, firsts):
         if np.isfinite(c.fitness):
             results.append((detect(c, model, frame, rig, fit_params, p, seed=seed), dataclasses.replace(c, source=name)))
-    results.sort(key=lambda dc: (-dc[0].standing, -dc[1].fitness))
-    return Acquired(results, islands)
+    return Acquired(ranked(results, p.passed_standing_ratio), islands)
+
+
+def ranked(results: list[tuple[Detection, Candidate]], passed_ratio: float) -> list[tuple[Detection, Candidate]]:
+    """The candidates ranked by standing (vision/detection.py), then fitness — except that when
+    the best-standing one fails detection (a look-alike beside the creature, or a fit spilling
+    over the creature's outline), the best-standing candidate that passes goes first if it
+    stands at least `passed_ratio` as high: nearly as far above this pair's null, and passing
+    every test."""
+    out = sorted(results, key=lambda dc: (-dc[0].standing, -dc[1].fitness))
+    if out and not out[0][0].passed and out[0][0].standing > 0:
+        for k, (d, _) in enumerate(out):
+            if d.passed and d.standing >= passed_ratio * out[0][0].standing:
+                out.insert(0, out.pop(k))
+                break
+    return out
 
 
 def estimate(model: PhotoModel, left_bgr: np.ndarray, right_bgr: np.ndarray, rig: Rig,
