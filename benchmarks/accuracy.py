@@ -120,6 +120,25 @@ def errors(est, truth: dict, cpu: float = math.nan) -> dict:
     return row
 
 
+def miss_kind(row: dict, min_contrast: float, max_outer: float) -> str | None:
+    """Where a target scene that is not a success ends (None for a success), from its candidate
+    list: no candidate within 5 % of the distance from the truth (the seeds or the GA never got
+    there), the best-standing candidate within 5 % rejected by detection (its contrast below
+    min_contrast, its outline share above max_outer, or both), or passing but ranked behind
+    another."""
+    if row["success"]:
+        return None
+    near = [c for c in row["candidates"] if c["off_pct"] <= 100 * SUCCESS_POS_FRAC]
+    if not near:
+        return "no candidate within 5 %" + (", found elsewhere" if row["found"] else "")
+    c = max(near, key=lambda c: c["standing"])
+    if c["passed"]:
+        return "within 5 %, passes, ranked behind another"
+    why = [w for w, bad in (("contrast", c["contrast"] < min_contrast), ("outline", c["outer_on_target"] > max_outer))
+           if bad]
+    return "within 5 %, rejected by " + " and ".join(why)
+
+
 def run_paper(sc, model, cfg, seed: int):
     """The paper's configuration: 68-bit GA, 30 individuals, 500 generations, narrow box."""
     from photoservo.vision.estimator import Estimate
@@ -241,7 +260,7 @@ def main(argv: list[str] | None = None) -> int:
         r.update(seed=1000 + i, kind=KINDS[i % 3], distractor=i % 4 == 3, split=is_split(i),
                  candidates=[{"off_pct": float(100 * np.linalg.norm(np.array(c["position_mm"]) - t_true) / t_true[2]),
                               "detection_score": c["detection_score"], "contrast": c["contrast"],
-                              "outer_on_target": c["outer_on_target"]}
+                              "outer_on_target": c["outer_on_target"], "standing": c["standing"], "passed": c["found"]}
                              for c in est.candidates])
         rows.append(r)
         print(f"  scene {i:3d} {r['kind']:<5} {'other' if other else 'same ':<5} z {r['distance_mm']:6.0f} "
@@ -351,11 +370,19 @@ def main(argv: list[str] | None = None) -> int:
           "look_alike_scenes": len(fp_look),
           "look_alike_false_positive_rate": float(np.mean(fp_look)) if fp_look else None}
 
+    misses: dict[str, list[int]] = {}
+    for r in rows:
+        kind = miss_kind(r, cfg.estimator.min_contrast, cfg.estimator.max_outer_on_target)
+        if kind is not None:
+            misses.setdefault(kind, []).append(r["seed"])
+
     print()
     print(HEADER)
     for name, s in table.items():
         print(fmt_row(name, s))
     print()
+    print("target scenes that are not a success, by where they end: " + "; ".join(
+        f"{k}: {len(v)} ({', '.join(map(str, v))})" for k, v in sorted(misses.items())))
     print(f"false positives: empty water {sum(fp_empty)}/{len(fp_empty)}, look-alike only {sum(fp_look)}/{len(fp_look)} "
           f"(min_contrast {thr_in_use})")
     print(f"detection contrast: empty water max {calib['empty_contrast']['max']}, look-alikes max "
@@ -378,7 +405,7 @@ def main(argv: list[str] | None = None) -> int:
         "benchmark": "accuracy", "machine": {"cpus": os.cpu_count(), "load_average": load,
                                              "note": "shared, loaded machine: wall times are medians under load"},
         "config": {"ga": dataclasses.asdict(cfg.ga), "estimator": dataclasses.asdict(cfg.estimator)},
-        "targets": targets, "table": table, "false_positives": fp, "calibration": calib,
+        "targets": targets, "table": table, "misses": misses, "false_positives": fp, "calibration": calib,
         "generator": a.generator, "scenes": rows, "many_hued": many, "nulls": nulls, "baselines": baseline_rows,
         "python": sys.version.split()[0],
     }
