@@ -11,7 +11,7 @@ Hue is OpenCV's 8-bit hue, 0..179 (2 degrees per step), circular.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import cv2
 import numpy as np
@@ -47,6 +47,8 @@ class PhotoModel:
     size_px: (width, height) of the target's bounding rectangle in the photo (px).
     origin_px: (x, y) of the model origin in the photo (px).
     mask: (H, W) uint8 target mask over the photo (255 = target), for previews.
+    inner_value: (N_in,) float32 the photo's grey level at each inner point (the appearance cue,
+        `vision/appearance.py`); empty for a model built without a photo (the cue is then off).
     """
 
     inner_uv: np.ndarray
@@ -56,6 +58,7 @@ class PhotoModel:
     size_px: tuple[float, float]
     origin_px: tuple[float, float]
     mask: np.ndarray
+    inner_value: np.ndarray = field(default_factory=lambda: np.zeros(0, np.float32))
 
     def size_mm(self, alpha: float) -> tuple[float, float]:
         """Real size (width along model x, height along model y) in mm at ratio alpha (px/mm)."""
@@ -282,7 +285,8 @@ def build_photo_model(photo_bgr: np.ndarray, params: PhotoModelParams,
     its ratio of outer to inner points would grow as the photo shrinks). Above
     `params.max_points` points the pitch is coarsened until they fit. `target_hues` marks the
     hues of the inner points and of every hue holding >= 1 % of the target's hued pixels,
-    widened by `params.hue_tolerance`.
+    widened by `params.hue_tolerance`. `inner_value` holds the photo's grey at each inner point
+    (`appearance.photo_values`).
 
     Raises InputError when the photo is not a colour image, no target separates, or the target
     carries no hue (all grey/white/dark)."""
@@ -308,9 +312,12 @@ def build_photo_model(photo_bgr: np.ndarray, params: PhotoModelParams,
     lut = np.zeros(HUE_BINS, bool)
     for k in np.flatnonzero(present):
         lut[(k + np.arange(-params.hue_tolerance, params.hue_tolerance + 1)) % HUE_BINS] = True
+    from photoservo.vision.appearance import photo_values  # appearance imports this module
+
     o = np.array(origin)
     return PhotoModel(inner_uv=pin - o, inner_hue=hin.astype(np.uint8), outer_uv=pout - o,
-                      target_hues=lut, size_px=(float(w), float(h)), origin_px=origin, mask=mask)
+                      target_hues=lut, size_px=(float(w), float(h)), origin_px=origin, mask=mask,
+                      inner_value=photo_values(photo_bgr, pin, interval))
 
 
 def load_photo_model(path: str, params: PhotoModelParams,

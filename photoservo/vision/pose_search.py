@@ -37,7 +37,6 @@ from collections.abc import Generator
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Literal, TypeVar
 
-import cv2
 import numpy as np
 
 from photoservo.geometry import (
@@ -49,6 +48,7 @@ from photoservo.vision.ga import GA, GAParams, Region
 from photoservo.vision.photo_model import HUE_BINS, PhotoModel
 from photoservo.vision.rig import Rig
 from photoservo.vision.stereo_plane import align_to_plane, fit_target_plane, grey
+from photoservo.vision.twins import alternatives
 
 if TYPE_CHECKING:
     from photoservo.vision.estimator import EstimatorParams
@@ -462,27 +462,3 @@ def drive(steps: Generator[int, None, T]) -> T:
             next(steps)
         except StopIteration as done:
             return done.value
-
-
-def alternatives(R: np.ndarray, t: np.ndarray) -> list[np.ndarray]:
-    """Orientations a flat target's pose is easily confused with (see `PoseSearch.run`): the
-    planar-ambiguity mirror, the heading turned by 180 degrees about the model normal, and both."""
-    half_turn = np.diag([-1.0, -1.0, 1.0])  # Rz(pi): heading + 180 deg
-    R_m = reflected_rotation(R, t)
-    return [R_m, R @ half_turn, R_m @ half_turn]
-
-
-def reflected_rotation(R: np.ndarray, t: np.ndarray) -> np.ndarray:
-    """The other solution of the planar pose ambiguity: a flat target seen along the ray d = t/|t|
-    looks nearly alike with its normal n and with n' = 2 (n·d) d - n (the normal mirrored about
-    the line of sight). Returns R' = Rot(n -> n') · R, the smallest turn taking n to n'."""
-    d = np.asarray(t, dtype=np.float64) / np.linalg.norm(t)
-    n = R[:, 2]
-    n2 = 2.0 * (n @ d) * d - n
-    axis = np.cross(n, n2)
-    s = np.linalg.norm(axis)
-    if s < 1e-12:
-        return R.copy()
-    ang = math.atan2(s, float(n @ n2))
-    rvec = axis / s * ang
-    return cv2.Rodrigues(rvec)[0] @ R

@@ -1,0 +1,161 @@
+"""The appearance cue: the brightness layout inside the creature, compared with the photo's by a
+correlation that normalises itself on the image.
+
+The fitness (method step 3) compares each inner point's hue with the image's. A creature of one
+hue turned head to tail about its middle covers nearly the same pixels with the same hue, so the
+hue fitness scores the two poses alike (squid and crab twins, README "Accuracy"). The photo's
+brightness is not symmetric: the mantle, the head, the eyes, the shading of the legs. Per inner
+point S_in the photo-model keeps the photo's grey level (`PhotoModel.inner_value`, sampled from
+the photo blurred over half a sampling pitch); at a pose, the inner points are projected into
+each camera, the grey image is sampled there (blurred over the same half pitch as it appears in
+that image). Over the inner points that land on one of the target's hues (nearest pixel, as the
+fitness reads it: foam, glare and water beside the creature carry no part of its layout, and a
+white foam band would otherwise dominate), each set of samples loses its least-squares plane
+over the points' model offsets (u, v) — a brightness gradient across the creature is the light's
+(the sun on a curved body, a studio lamp in the photo), not the creature's: on the harbour
+generator the scene's and the photo's gradients often run opposite and the plain correlation
+then prefers the turned twin — and the residuals are correlated (Pearson, per camera):
+
+    g~ = g - plane_fit(g; u, v),   p~ = p - plane_fit(p; u, v)
+    rho_c = sum_i g~_i p~_i / sqrt(sum_i g~_i^2 · sum_i p~_i^2)
+    A     = mean over the cameras with >= MIN_POINTS inner points on target hue of rho_c   (-1..1)
+
+rho is invariant to a gain and an offset of the image's grey (a brighter, darker or evenly
+colour-cast copy of a creature of one hue scores the same), and a pose turned by 180 degrees
+about the creature's middle pairs each photo sample with the grey of the other end: it scores
+lower wherever the creature's brightness is not symmetric. It is not a detector: the samples of
+water under a look-alike correlate with nothing, but neither does a creature under foam. Use it
+to choose between poses the hue fitness cannot tell apart (`estimator`'s twin decision).
+
+Frames: R, t model in the left camera frame (mm); alpha px/mm; images (H, W) float32 grey
+(`stereo_plane.grey`).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+from photoservo.vision.fitness import StereoHue
+from photoservo.vision.photo_model import HUE_BINS, PhotoModel
+from photoservo.vision.rig import Rig, project_points
+from photoservo.vision.stereo_plane import _patches, grey
+
+MIN_POINTS = 8  # a camera whose image holds fewer inner points on target hue gives no correlation
+
+
+@dataclass(frozen=True)
+class StereoGrey:
+    """One stereo frame as grey images (float32 (H, W), `stereo_plane.grey`)."""
+
+    left: np.ndarray
+    right: np.ndarray
+
+
+def stereo_grey(left_bgr: np.ndarray, right_bgr: np.ndarray) -> StereoGrey:
+    """Grey images of a stereo pair (BGR uint8) for `appearance`."""
+    return StereoGrey(left=grey(left_bgr), right=grey(right_bgr))
+
+
+def sampling_pitch(uv: np.ndarray) -> float:
+    """The grid pitch (px) of the photo-model's points (`photo_model._grid`): the smallest gap
+    between distinct column offsets of the inner points (1.0 when the points are not a grid)."""
+    x = np.unique(np.round(np.asarray(uv, dtype=np.float64)[:, 0], 3))
+    gaps = np.diff(x)
+    return float(gaps.min()) if gaps.size else 1.0
+
+
+def photo_values(photo_bgr: np.ndarray, points_px: np.ndarray, pitch_px: float) -> np.ndarray:
+    """`PhotoModel.inner_value`: the photo's grey level at each inner point (photo px), from the
+    photo blurred by a Gaussian of sigma half a sampling pitch (each point stands for its cell of
+    the grid, not for one pixel). float32 (N,)."""
+    g = cv2.cvtColor(photo_bgr, cv2.COLOR_BGR2GRAY).astype(np.float32)
+    g = cv2.GaussianBlur(g, (0, 0), max(0.5, 0.5 * pitch_px))
+    return _patches(g, np.asarray(points_px, dtype=np.float64), 0)[0][:, 0, 0].astype(np.float32)
+
+
+def detrended(values: np.ndarray, uv: np.ndarray) -> np.ndarray:
+    """values (N,) less their least-squares plane over the model's point offsets uv (N, 2):
+    the layout without a brightness gradient across the creature (the light's, not its own)."""
+    A = np.column_stack([np.ones(len(uv)), uv])
+    coef, *_ = np.linalg.lstsq(A, values, rcond=None)
+    return values - A @ coef
+
+
+def correlation(a: np.ndarray, b: np.ndarray) -> float:
+    """Pearson correlation of two sample vectors (nan when either is constant or empty)."""
+    a = np.asarray(a, dtype=np.float64) - np.mean(a)
+    b = np.asarray(b, dtype=np.float64) - np.mean(b)
+    den = math.sqrt(float(a @ a) * float(b @ b))
+    return float(a @ b) / den if den > 1e-9 else math.nan
+
+
+def image_values(uv: np.ndarray, grey: np.ndarray, sigma_px: float) -> tuple[np.ndarray, np.ndarray]:
+    """Grey level (bilinear) at image points uv (N, 2) px, the image blurred by a Gaussian of
+    sigma `sigma_px` (only the box around the points is blurred). Returns (values (N,), inside (N,))."""
+    H, W = grey.shape
+    ok = np.isfinite(uv).all(axis=1)
+    ok &= (uv[:, 0] >= 0) & (uv[:, 0] <= W - 1) & (uv[:, 1] >= 0) & (uv[:, 1] <= H - 1)
+    vals = np.zeros(len(uv), np.float64)
+    if not ok.any():
+        return vals, ok
+    m = int(math.ceil(3 * sigma_px)) + 2
+    x0, y0 = (max(0, int(np.floor(uv[ok, k].min())) - m) for k in (0, 1))
+    x1, y1 = min(W, int(np.ceil(uv[ok, 0].max())) + m + 1), min(H, int(np.ceil(uv[ok, 1].max())) + m + 1)
+    roi = np.ascontiguousarray(grey[y0:y1, x0:x1], dtype=np.float32)
+    if sigma_px >= 0.3:
+        roi = cv2.GaussianBlur(roi, (0, 0), sigma_px)
+    p, inside = _patches(roi, uv[ok] - (x0, y0), 0)
+    vals[ok] = p[:, 0, 0]
+    ok[ok] = inside
+    return vals, ok
+
+
+def on_target(uv: np.ndarray, hue: np.ndarray, target_hues: np.ndarray) -> np.ndarray:
+    """Image points uv (N, 2) px whose nearest pixel carries one of the target's hues (bool (N,);
+    False outside the image or on a pixel without hue)."""
+    H, W = hue.shape
+    with np.errstate(invalid="ignore"):
+        c = np.floor(np.nan_to_num(uv, nan=-1.0) + 0.5)
+    inside = (c[:, 0] >= 0) & (c[:, 0] < W) & (c[:, 1] >= 0) & (c[:, 1] < H)
+    h = hue[np.where(inside, c[:, 1], 0).astype(np.intp), np.where(inside, c[:, 0], 0).astype(np.intp)]
+    lut = np.zeros(256, bool)
+    lut[:HUE_BINS] = np.asarray(target_hues, bool)
+    return inside & lut[h]
+
+
+def appearance(R: np.ndarray, t: np.ndarray, alpha: float, model: PhotoModel, frame: StereoHue,
+               grey_frame: StereoGrey, rig: Rig) -> float:
+    """The appearance score A of one pose (module docstring): the mean over both cameras of the
+    correlation between the photo's grey at the inner points (`model.inner_value`) and the
+    image's grey at their projections, over the points that land on a target hue, each less its
+    plane over the points' model offsets (`detrended`). R (3, 3) the
+    model's linear map (a rotation, or `Candidate.R_model` with the per-axis size), t (3,) mm,
+    alpha px/mm; `frame` the pair's hue images, `grey_frame` its grey images. nan when the model
+    has no grey samples or no camera has MIN_POINTS inner points on target hue."""
+    if len(model.inner_value) != len(model.inner_uv):
+        return math.nan
+    R = np.asarray(R, dtype=np.float64).reshape(3, 3)
+    t = np.asarray(t, dtype=np.float64).reshape(3)
+    X = np.column_stack([model.inner_uv / alpha, np.zeros(len(model.inner_uv))]) @ R.T + t
+    half_pitch = 0.5 * sampling_pitch(model.inner_uv)
+    rhos = []
+    for cam, Xc, img, hue in ((rig.left, X, grey_frame.left, frame.left),
+                              (rig.right, X @ rig.R.T + rig.T, grey_frame.right, frame.right)):
+        zc = float(np.median(Xc[:, 2]))
+        if zc <= 0:
+            continue
+        # half a pitch as it appears in this camera: photo px -> mm (1/alpha) -> image px (f / z)
+        sigma = half_pitch * float(cam.K[0, 0]) / (alpha * zc)
+        uv = project_points(Xc, cam)
+        vals, ok = image_values(uv, img, sigma)
+        ok &= on_target(uv, hue, model.target_hues)
+        if ok.sum() >= MIN_POINTS:
+            uv_ok = model.inner_uv[ok]
+            r = correlation(detrended(vals[ok], uv_ok), detrended(model.inner_value[ok].astype(np.float64), uv_ok))
+            if np.isfinite(r):
+                rhos.append(r)
+    return float(np.mean(rhos)) if rhos else math.nan
