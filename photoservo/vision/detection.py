@@ -51,9 +51,11 @@ if TYPE_CHECKING:
     from photoservo.vision.estimator import EstimatorParams
 
 # placements of the standing's null at any depth: its (1 - 1/n) quantile, n the image's model-sized
-# places (100 to thousands), is the largest of the draws when n exceeds them, and the largest of 40
-# fell short of it by 0.05-0.1 (sd 0.05-0.15) - most for the smallest models, which it flattered
-WIDE_PLACEMENTS = 160
+# places (100 to thousands), is the largest of the draws when n exceeds them, so few draws make
+# the standing too high, most for the fits with the most places (the smallest): on the real pair,
+# against 2000 draws, by 0.03-0.2 (sd 0.05-0.14) from 40 draws, 0.01-0.09 (sd <= 0.08) from 160,
+# 0-0.04 (sd <= 0.035 but one 0.07) from 320
+WIDE_PLACEMENTS = 320
 
 
 def confidence(contrast: float, params: EstimatorParams) -> float:
