@@ -26,6 +26,7 @@ holds more of than the frame does (`vision/silhouette.py`), alternately.
 from __future__ import annotations
 
 import dataclasses
+import math
 import time
 from collections.abc import Generator
 from dataclasses import dataclass, field
@@ -34,6 +35,7 @@ from typing import Literal
 import numpy as np
 
 from photoservo.errors import InputError
+from photoservo.vision.appearance import StereoGrey, appearance, stereo_grey
 from photoservo.vision.detection import Detection, detect
 from photoservo.vision.fitness import FitnessParams, StereoHue, stereo_hue
 from photoservo.vision.ga import GAParams
@@ -80,6 +82,10 @@ class EstimatorParams:
     min_contrast: float  # detection: found = contrast over the pair's own null >= this (vision/detection.py)
     max_outer_on_target: float  # detection also needs at most this share of outer points on target hue
     passed_standing_ratio: float  # a candidate that passes ranks first when it stands >= this x the top, which fails
+    twin_appearance: bool  # let the appearance cue choose between the first candidate and its head-to-tail twin
+    twin_min_appearance: float  # ...the twin is taken when its appearance score is at least this,
+    twin_appearance_margin: float  # ...at least this above the candidate's,
+    twin_fitness_tol: float  # ...and its fitness at most this below the candidate's
     confidence_scale: float  # width of the logistic confidence around min_contrast
 
     def validate(self, where: str) -> None:
@@ -99,6 +105,9 @@ class EstimatorParams:
             ("layout_share", 0.0 <= self.layout_share <= 1.0, "must be in [0, 1]"),
             ("group_reach", self.group_reach >= 0, "must be >= 0"),
             ("passed_standing_ratio", 0.0 <= self.passed_standing_ratio <= 1.0, "must be in [0, 1]"),
+            ("twin_min_appearance", -1.0 <= self.twin_min_appearance <= 1.0, "must be in [-1, 1]"),
+            ("twin_appearance_margin", self.twin_appearance_margin >= 0, "must be >= 0"),
+            ("twin_fitness_tol", self.twin_fitness_tol >= 0, "must be >= 0"),
             ("min_generations", 0 <= self.min_generations <= self.max_generations,
              "need 0 <= min_generations <= max_generations"),
             ("patience", self.patience >= 1, "must be >= 1"),
@@ -233,7 +242,57 @@ def acquisition(model: PhotoModel, left_bgr: np.ndarray, right_bgr: np.ndarray, 
     for (name, search), c in zip(islands, firsts):
         if np.isfinite(c.fitness):
             results.append((detect(c, model, frame, rig, fit_params, p, seed=seed), dataclasses.replace(c, source=name)))
-    return Acquired(ranked(results, p.passed_standing_ratio), islands)
+    results = ranked(results, p.passed_standing_ratio)
+    if p.twin_appearance and results:
+        search = dict(islands)[results[0][1].source]
+        results[0] = yield from appearance_twin(results[0], search, stereo_grey(left_bgr, right_bgr), p, seed)
+    return Acquired(results, islands)
+
+
+# the head-to-tail twin's refinement windows (`PoseSearch.turned_steps`), tried in turn until one
+# wins: (position +- this fraction of the depth, alpha within a factor 1 +- this). A fit displaced
+# along the body has its twin's centroid off the creature's, and the hue fitness of a creature cut
+# by foam has more than one peak along it: the wider window finds the twin there.
+TURNED_WINDOWS = ((0.03, 0.08), (0.06, 0.15), (0.06, 0.15))
+
+
+def appearance_twin(first: tuple[Detection, Candidate], search: PoseSearch, grey_frame: StereoGrey,
+                    p: EstimatorParams, seed: int = 0) -> Generator[int, None, tuple[Detection, Candidate]]:
+    """The chosen candidate or its head-to-tail twin at the same place (`PoseSearch.turned_steps`:
+    turned about the photo mask's centroid, refined by a short GA in each of TURNED_WINDOWS in
+    turn), decided by the appearance cue (`vision/appearance.py`): the hue fitness scores a
+    creature of one hue and its turned twin alike, the photo's brightness layout does not. A twin
+    is taken when its fitness is at most `twin_fitness_tol` below the candidate's, its appearance
+    score at least `twin_min_appearance` and `twin_appearance_margin` above the candidate's, and
+    it passes detection whenever the candidate does (it is then re-fitted per axis as the leading
+    island is). A candidate whose own score leaves no room for that (>= min + margin) is kept
+    without a search. One generation per step; returns (detection, candidate)."""
+    d, c = first
+    model, frame, rig = search.model, search.frame, search.rig
+
+    def score(x: Candidate) -> float:
+        return appearance(x.R_model, x.position_mm, x.alpha, model, frame, grey_frame, rig)
+
+    a_c = score(c)
+    if not np.isfinite(a_c) or a_c >= p.twin_min_appearance + p.twin_appearance_margin:
+        return first
+    for position_frac, alpha_frac in TURNED_WINDOWS:
+        twin = yield from search.turned_steps(c, position_frac, alpha_frac)
+        a_t = score(twin) if twin.fitness >= c.fitness - p.twin_fitness_tol else math.nan
+        if a_t >= p.twin_min_appearance and a_t - a_c >= p.twin_appearance_margin:
+            break
+    else:
+        return first
+    if p.aspect_max > 1.0:
+        g0 = search.ga.generation
+        k = search.refine_aspect(twin, p.aspect_max)
+        if k.fitness >= twin.fitness + p.aspect_min_gain:
+            twin = k
+        yield search.ga.generation - g0
+    d_t = detect(twin, model, frame, rig, search.fit_params, p, seed=seed)
+    if d.passed and not d_t.passed:
+        return first
+    return d_t, twin
 
 
 def ranked(results: list[tuple[Detection, Candidate]], passed_ratio: float) -> list[tuple[Detection, Candidate]]:

@@ -48,7 +48,7 @@ from photoservo.vision.ga import GA, GAParams, Region
 from photoservo.vision.photo_model import HUE_BINS, PhotoModel
 from photoservo.vision.rig import Rig
 from photoservo.vision.stereo_plane import align_to_plane, fit_target_plane, grey
-from photoservo.vision.twins import alternatives
+from photoservo.vision.twins import alternatives, turned_about_centroid
 
 if TYPE_CHECKING:
     from photoservo.vision.estimator import EstimatorParams
@@ -429,6 +429,18 @@ class PoseSearch:
                 best = c
                 self.ga.inject(self.space.encode(c.R, c.position_mm, c.alpha))
         return Candidate(best.R, best.position_mm, best.alpha, best.fitness, self.ga.generation, best.source)
+
+    def turned_steps(self, best: Candidate, position_frac: float, alpha_frac: float
+                     ) -> Generator[int, None, Candidate]:
+        """The head-to-tail twin of `best` at the same place, one generation per step (see
+        `steps`): turned about the photo mask's centroid (`turned_about_centroid`) and refined by a
+        short GA in a window of position +- position_frac of the depth, heading and tilt +- 15 deg,
+        alpha within (1 +- alpha_frac) (the twin's per-axis k is 1). The estimator lets the
+        appearance cue choose between the candidate and its twin (`estimator.appearance_twin`)."""
+        R, t = turned_about_centroid(best.R, best.position_mm, best.alpha, self.model, best.aspect)
+        c = yield from self.local_steps(R, t, best.alpha, position_frac=position_frac, heading_deg=15.0,
+                                        tilt_deg=15.0, alpha_frac=alpha_frac)
+        return dataclasses.replace(c, source=best.source)
 
     def refine_tilt(self, best: Candidate, left_bgr: np.ndarray, right_bgr: np.ndarray) -> Candidate:
         """Tilt from the disparity gradient (`vision/stereo_plane.py`): fit the target's plane
