@@ -27,8 +27,15 @@ lower wherever the creature's brightness is not symmetric. It is not a detector:
 water under a look-alike correlate with nothing, but neither does a creature under foam. Use it
 to choose between poses the hue fitness cannot tell apart (`estimator`'s twin decision).
 
+`body_layout` is the same correlation for detection (`vision/detection.py`): is there a
+creature's brightness layout under a candidate at all? It reads the brightness V = max(B, G, R)
+(`brightness`: the pattern of a saturated creature lies in its strongest channel; the photo's
+`PhotoModel.inner_brightness`) at the inner points at least `BODY_MARGIN_PX` image px inside the
+photo's outline (`body_points`) — whatever hue the image has there, so that a model laid on water
+or on a float of the creature's colour is read where its body falls — and takes the worse camera.
+
 Frames: R, t model in the left camera frame (mm); alpha px/mm; images (H, W) float32 grey
-(`stereo_plane.grey`).
+(`stereo_plane.grey`) or brightness (`brightness`).
 """
 
 from __future__ import annotations
@@ -45,6 +52,7 @@ from photoservo.vision.rig import Rig, project_points
 from photoservo.vision.stereo_plane import _patches, grey
 
 MIN_POINTS = 8  # a camera whose image holds fewer inner points on target hue gives no correlation
+BODY_MARGIN_PX = 1.5  # body_points: inner points at least this far (image px) inside the photo's outline
 
 
 @dataclass(frozen=True)
@@ -60,6 +68,17 @@ def stereo_grey(left_bgr: np.ndarray, right_bgr: np.ndarray) -> StereoGrey:
     return StereoGrey(left=grey(left_bgr), right=grey(right_bgr))
 
 
+def brightness(bgr: np.ndarray) -> np.ndarray:
+    """float32 brightness V = max(B, G, R) of a BGR image (HSV's value)."""
+    b, g, r = cv2.split(bgr)
+    return cv2.max(cv2.max(b, g), r).astype(np.float32)
+
+
+def stereo_value(left_bgr: np.ndarray, right_bgr: np.ndarray) -> StereoGrey:
+    """Brightness images (`brightness`) of a stereo pair (BGR uint8) for `body_layout`."""
+    return StereoGrey(left=brightness(left_bgr), right=brightness(right_bgr))
+
+
 def sampling_pitch(uv: np.ndarray) -> float:
     """The grid pitch (px) of the photo-model's points (`photo_model._grid`): the smallest gap
     between distinct column offsets of the inner points (1.0 when the points are not a grid)."""
@@ -68,11 +87,11 @@ def sampling_pitch(uv: np.ndarray) -> float:
     return float(gaps.min()) if gaps.size else 1.0
 
 
-def photo_values(photo_bgr: np.ndarray, points_px: np.ndarray, pitch_px: float) -> np.ndarray:
+def photo_values(photo_bgr: np.ndarray, points_px: np.ndarray, pitch_px: float, plane=grey) -> np.ndarray:
     """`PhotoModel.inner_value`: the photo's grey level at each inner point (photo px), from the
     photo blurred by a Gaussian of sigma half a sampling pitch (each point stands for its cell of
-    the grid, not for one pixel). float32 (N,)."""
-    g = cv2.cvtColor(photo_bgr, cv2.COLOR_BGR2GRAY).astype(np.float32)
+    the grid, not for one pixel); `plane` = `brightness`: `PhotoModel.inner_brightness`. float32 (N,)."""
+    g = plane(photo_bgr)
     g = cv2.GaussianBlur(g, (0, 0), max(0.5, 0.5 * pitch_px))
     return _patches(g, np.asarray(points_px, dtype=np.float64), 0)[0][:, 0, 0].astype(np.float32)
 
@@ -127,6 +146,36 @@ def on_target(uv: np.ndarray, hue: np.ndarray, target_hues: np.ndarray) -> np.nd
     return inside & lut[h]
 
 
+def camera_correlations(R: np.ndarray, t: np.ndarray, alpha: float, model: PhotoModel, samples: np.ndarray,
+                        planes: StereoGrey, rig: Rig, select) -> list[float]:
+    """rho_c of each camera (left, right; module docstring): the image `planes` sampled at the
+    projected inner points (blurred over half a sampling pitch as it appears there), correlated
+    with the photo's `samples` (N_in,), both detrended, over the points `select(k, uv)` keeps
+    (k = 0 left, 1 right; uv (N_in, 2) image px); nan for a camera with fewer than MIN_POINTS. R (3, 3)
+    the model's linear map, t (3,) mm, alpha px/mm."""
+    R = np.asarray(R, dtype=np.float64).reshape(3, 3)
+    t = np.asarray(t, dtype=np.float64).reshape(3)
+    X = np.column_stack([model.inner_uv / alpha, np.zeros(len(model.inner_uv))]) @ R.T + t
+    half_pitch = 0.5 * sampling_pitch(model.inner_uv)
+    rhos = []
+    for k, (cam, Xc, img) in enumerate(((rig.left, X, planes.left), (rig.right, X @ rig.R.T + rig.T, planes.right))):
+        zc = float(np.median(Xc[:, 2]))
+        if zc <= 0:
+            rhos.append(math.nan)
+            continue
+        # half a pitch as it appears in this camera: photo px -> mm (1/alpha) -> image px (f / z)
+        sigma = half_pitch * float(cam.K[0, 0]) / (alpha * zc)
+        uv = project_points(Xc, cam)
+        vals, ok = image_values(uv, img, sigma)
+        ok &= select(k, uv)
+        r = math.nan
+        if ok.sum() >= MIN_POINTS:
+            uv_ok = model.inner_uv[ok]
+            r = correlation(detrended(vals[ok], uv_ok), detrended(np.asarray(samples, np.float64)[ok], uv_ok))
+        rhos.append(r)
+    return rhos
+
+
 def appearance(R: np.ndarray, t: np.ndarray, alpha: float, model: PhotoModel, frame: StereoHue,
                grey_frame: StereoGrey, rig: Rig) -> float:
     """The appearance score A of one pose (module docstring): the mean over both cameras of the
@@ -138,24 +187,30 @@ def appearance(R: np.ndarray, t: np.ndarray, alpha: float, model: PhotoModel, fr
     has no grey samples or no camera has MIN_POINTS inner points on target hue."""
     if len(model.inner_value) != len(model.inner_uv):
         return math.nan
-    R = np.asarray(R, dtype=np.float64).reshape(3, 3)
-    t = np.asarray(t, dtype=np.float64).reshape(3)
-    X = np.column_stack([model.inner_uv / alpha, np.zeros(len(model.inner_uv))]) @ R.T + t
-    half_pitch = 0.5 * sampling_pitch(model.inner_uv)
-    rhos = []
-    for cam, Xc, img, hue in ((rig.left, X, grey_frame.left, frame.left),
-                              (rig.right, X @ rig.R.T + rig.T, grey_frame.right, frame.right)):
-        zc = float(np.median(Xc[:, 2]))
-        if zc <= 0:
-            continue
-        # half a pitch as it appears in this camera: photo px -> mm (1/alpha) -> image px (f / z)
-        sigma = half_pitch * float(cam.K[0, 0]) / (alpha * zc)
-        uv = project_points(Xc, cam)
-        vals, ok = image_values(uv, img, sigma)
-        ok &= on_target(uv, hue, model.target_hues)
-        if ok.sum() >= MIN_POINTS:
-            uv_ok = model.inner_uv[ok]
-            r = correlation(detrended(vals[ok], uv_ok), detrended(model.inner_value[ok].astype(np.float64), uv_ok))
-            if np.isfinite(r):
-                rhos.append(r)
+    hues = (frame.left, frame.right)
+    rhos = [r for r in camera_correlations(R, t, alpha, model, model.inner_value, grey_frame, rig,
+                                           lambda k, uv: on_target(uv, hues[k], model.target_hues))
+            if np.isfinite(r)]
     return float(np.mean(rhos)) if rhos else math.nan
+
+
+def body_points(model: PhotoModel, scale: float) -> np.ndarray:
+    """(N_in,) bool: the inner points at least BODY_MARGIN_PX image px inside the photo mask's
+    outline at apparent scale `scale` (image px per photo px), whose image samples do not mix
+    with what lies beside the creature."""
+    depth = cv2.distanceTransform((model.mask > 0).astype(np.uint8), cv2.DIST_L2, 5)
+    c = np.clip(np.round(model.inner_uv + np.asarray(model.origin_px)).astype(np.intp), 0,
+                [depth.shape[1] - 1, depth.shape[0] - 1])
+    return depth[c[:, 1], c[:, 0]] >= BODY_MARGIN_PX / max(scale, 1e-9)
+
+
+def body_layout(R: np.ndarray, t: np.ndarray, alpha: float, model: PhotoModel, value_frame: StereoGrey, rig: Rig,
+                body: np.ndarray) -> float:
+    """The body-brightness layout B of one pose (module docstring): the worse camera's correlation
+    between the photo's brightness (`model.inner_brightness`) and the image's (`value_frame`,
+    `stereo_value`) over the inner points `body` (`body_points`), detrended. Arguments as
+    `appearance`. nan when the model has no brightness samples or a camera has too few points."""
+    if len(model.inner_brightness) != len(model.inner_uv):
+        return math.nan
+    rhos = camera_correlations(R, t, alpha, model, model.inner_brightness, value_frame, rig, lambda k, uv: body)
+    return float(min(rhos)) if all(np.isfinite(rhos)) else math.nan

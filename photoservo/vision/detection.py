@@ -23,6 +23,14 @@ at the candidate's own depth alone, a small fit on a spot of the colour far behi
 finds nothing else red and looked better than the creature, whose depth holds more of its
 colour). A model shrunk to a few pixels fits thousands of places and some small spot of its
 colour somewhere; the creature's own scale fits a few dozen.
+
+The outline test alone rejects true creatures whose outline differs from the photo's (another
+individual's fins and proportions, a rim the photo cuts off, a real target cut off by what lies
+in front of it). A candidate whose outer points spill (up to `max_outer_if_appearance`) still
+passes when the brightness layout inside it is the photo's by both appearance cues
+(`vision/appearance.py`, `appearance_pair`): the grey correlation over the inner points on
+target hue and the body's brightness correlation, each at least `min_appearance`. Both are
+Pearson correlations, invariant to the image's gain and offset.
 """
 
 from __future__ import annotations
@@ -35,6 +43,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from photoservo.geometry import rotation_from_heading_tilt
+from photoservo.vision.appearance import StereoGrey, appearance, body_layout, body_points
 from photoservo.vision.fitness import (
     OUT_MISMATCH,
     FitnessParams,
@@ -150,14 +159,17 @@ class Detection:
     at the null placements (0 for a creature whose hues the water lacks; near 1 for a many-hued
     one whose hues include the water's) — the creature's outline must end where the model's does
     (a buoy or another species of the same colour usually spills over).
-    passed = contrast >= min_contrast and outer_on_target <= max_outer_on_target;
+    passed = contrast >= min_contrast and (outer_on_target <= max_outer_on_target or excused),
+    excused = outer_on_target <= max_outer_if_appearance and appearance, body_layout >= min_appearance
+    (`appearance_pair`; module docstring);
     confidence = logistic((contrast - min_contrast) / confidence_scale)
-                 · logistic((max_outer_on_target - outer_on_target) / 0.02).
+                 · (1 if excused else logistic((max_outer_on_target - outer_on_target) / 0.02)).
     `threshold`: the detection score that would just pass in this pair (the tracker's per-frame
     test). `standing`: (score - q_b) / (1 - q_b) with q_b the (1 - 1/n) quantile of the null at
     any depth (at least the null's median), n = `placements` (module docstring): how the
     candidate compares with the best a search of this pair at its apparent scale finds
-    elsewhere; candidates are ranked by it."""
+    elsewhere; candidates are ranked by it. `appearance`, `body_layout`: `appearance_pair` (nan
+    when not measured)."""
 
     score: float
     null_level: float
@@ -167,11 +179,27 @@ class Detection:
     confidence: float
     threshold: float
     standing: float
+    appearance: float = math.nan
+    body_layout: float = math.nan
+
+
+def appearance_pair(c: Candidate, model: PhotoModel, frame: StereoHue, grey_frame: StereoGrey,
+                    value_frame: StereoGrey, rig: Rig) -> tuple[float, float]:
+    """The candidate's two appearance cues (`vision/appearance.py`): `appearance` (the photo's grey
+    at the inner points landing on target hue, both cameras averaged) and `body_layout` (its
+    brightness at the inner points inside the outline, the worse camera); nan where undefined."""
+    scale = float(rig.left.K[0, 0]) / (c.alpha * float(np.asarray(c.position_mm)[2]))  # image px per photo px
+    a = appearance(c.R_model, c.position_mm, c.alpha, model, frame, grey_frame, rig)
+    b = body_layout(c.R_model, c.position_mm, c.alpha, model, value_frame, rig, body_points(model, scale))
+    return a, b
 
 
 def detect(c: Candidate, model: PhotoModel, frame: StereoHue, rig: Rig, fit_params: FitnessParams,
-           p: EstimatorParams, seed: int = 0) -> Detection:
-    """The detection test of one candidate (see `Detection`); `seed` draws the null placements."""
+           p: EstimatorParams, seed: int = 0, grey_frame: StereoGrey | None = None,
+           value_frame: StereoGrey | None = None) -> Detection:
+    """The detection test of one candidate (see `Detection`); `seed` draws the null placements;
+    `grey_frame` / `value_frame` (`appearance.stereo_grey` / `stereo_value` of the pair): the
+    appearance cues that may excuse an outline spill (module docstring; without them, none)."""
     strict = dataclasses.replace(fit_params, combine="min")
     score = float(fitness(c.R_model, c.position_mm, c.alpha, model, frame, rig, strict)[0])
     rng = np.random.default_rng(seed)
@@ -188,7 +216,13 @@ def detect(c: Candidate, model: PhotoModel, frame: StereoHue, rig: Rig, fit_para
     contrast = (score - q) / (1.0 - q)
     qb = min(float(np.quantile(wide, 1.0 - 1.0 / placements(c, model, rig))) if len(wide) else 0.0, 0.99)
     standing = (score - max(q, qb)) / (1.0 - max(q, qb))
-    passed = contrast >= p.min_contrast and outer <= p.max_outer_on_target
-    conf = confidence(contrast, p) / (1.0 + math.exp(-(p.max_outer_on_target - outer) / 0.02))
+    look = (math.nan, math.nan)
+    if grey_frame is not None and value_frame is not None:
+        look = appearance_pair(c, model, frame, grey_frame, value_frame, rig)
+    # an outline that spills is excused when the layout inside is the photo's by both cues (nan: no)
+    excused = outer <= p.max_outer_if_appearance and bool(np.all(np.asarray(look) >= p.min_appearance))
+    passed = contrast >= p.min_contrast and (outer <= p.max_outer_on_target or excused)
+    outline = 1.0 if excused else 1.0 / (1.0 + math.exp(-(p.max_outer_on_target - outer) / 0.02))
     return Detection(score=score, null_level=q, contrast=contrast, outer_on_target=outer, passed=bool(passed),
-                     confidence=conf, threshold=q + p.min_contrast * (1.0 - q), standing=standing)
+                     confidence=confidence(contrast, p) * outline, threshold=q + p.min_contrast * (1.0 - q),
+                     standing=standing, appearance=look[0], body_layout=look[1])

@@ -35,7 +35,7 @@ from typing import Literal
 import numpy as np
 
 from photoservo.errors import InputError
-from photoservo.vision.appearance import StereoGrey, appearance, stereo_grey
+from photoservo.vision.appearance import StereoGrey, appearance, stereo_grey, stereo_value
 from photoservo.vision.detection import Detection, detect
 from photoservo.vision.fitness import FitnessParams, StereoHue, stereo_hue
 from photoservo.vision.ga import GAParams
@@ -81,6 +81,8 @@ class EstimatorParams:
     alpha_tol: float  # ... best alpha changed by less than this fraction
     min_contrast: float  # detection: found = contrast over the pair's own null >= this (vision/detection.py)
     max_outer_on_target: float  # detection also needs at most this share of outer points on target hue
+    max_outer_if_appearance: float  # ...or at most this share when both appearance cues reach min_appearance
+    min_appearance: float  # appearance cues (vision/appearance.py) that excuse an outline spill
     passed_standing_ratio: float  # a candidate that passes ranks first when it stands >= this x the top, which fails
     twin_appearance: bool  # let the appearance cue choose between the first candidate and its head-to-tail twin
     twin_min_appearance: float  # ...the twin is taken when its appearance score is at least this,
@@ -108,6 +110,7 @@ class EstimatorParams:
             ("twin_min_appearance", -1.0 <= self.twin_min_appearance <= 1.0, "must be in [-1, 1]"),
             ("twin_appearance_margin", self.twin_appearance_margin >= 0, "must be >= 0"),
             ("twin_fitness_tol", self.twin_fitness_tol >= 0, "must be >= 0"),
+            ("max_outer_if_appearance", 0.0 <= self.max_outer_if_appearance <= 1.0, "must be in [0, 1]"),
             ("min_generations", 0 <= self.min_generations <= self.max_generations,
              "need 0 <= min_generations <= max_generations"),
             ("patience", self.patience >= 1, "must be >= 1"),
@@ -239,13 +242,15 @@ def acquisition(model: PhotoModel, left_bgr: np.ndarray, right_bgr: np.ndarray, 
             firsts[lead] = c
         yield search.ga.generation - g0
     results = []
+    looks = dict(grey_frame=stereo_grey(left_bgr, right_bgr), value_frame=stereo_value(left_bgr, right_bgr))
     for (name, search), c in zip(islands, firsts):
         if np.isfinite(c.fitness):
-            results.append((detect(c, model, frame, rig, fit_params, p, seed=seed), dataclasses.replace(c, source=name)))
+            results.append((detect(c, model, frame, rig, fit_params, p, seed=seed, **looks),
+                            dataclasses.replace(c, source=name)))
     results = ranked(results, p.passed_standing_ratio)
     if p.twin_appearance and results:
         search = dict(islands)[results[0][1].source]
-        results[0] = yield from appearance_twin(results[0], search, stereo_grey(left_bgr, right_bgr), p, seed)
+        results[0] = yield from appearance_twin(results[0], search, looks["grey_frame"], p, seed, looks["value_frame"])
     return Acquired(results, islands)
 
 
@@ -257,7 +262,8 @@ TURNED_WINDOWS = ((0.03, 0.08), (0.06, 0.15), (0.06, 0.15))
 
 
 def appearance_twin(first: tuple[Detection, Candidate], search: PoseSearch, grey_frame: StereoGrey,
-                    p: EstimatorParams, seed: int = 0) -> Generator[int, None, tuple[Detection, Candidate]]:
+                    p: EstimatorParams, seed: int = 0, value_frame: StereoGrey | None = None
+                    ) -> Generator[int, None, tuple[Detection, Candidate]]:
     """The chosen candidate or its head-to-tail twin at the same place (`PoseSearch.turned_steps`:
     turned about the photo mask's centroid, refined by a short GA in each of TURNED_WINDOWS in
     turn), decided by the appearance cue (`vision/appearance.py`): the hue fitness scores a
@@ -266,7 +272,9 @@ def appearance_twin(first: tuple[Detection, Candidate], search: PoseSearch, grey
     score at least `twin_min_appearance` and `twin_appearance_margin` above the candidate's, and
     it passes detection whenever the candidate does (it is then re-fitted per axis as the leading
     island is). A candidate whose own score leaves no room for that (>= min + margin) is kept
-    without a search. One generation per step; returns (detection, candidate)."""
+    without a search. `value_frame` (`appearance.stereo_value`): the twin's detection may excuse an
+    outline spill as the candidate's may (vision/detection.py). One generation per step; returns
+    (detection, candidate)."""
     d, c = first
     model, frame, rig = search.model, search.frame, search.rig
 
@@ -289,7 +297,8 @@ def appearance_twin(first: tuple[Detection, Candidate], search: PoseSearch, grey
         if k.fitness >= twin.fitness + p.aspect_min_gain:
             twin = k
         yield search.ga.generation - g0
-    d_t = detect(twin, model, frame, rig, search.fit_params, p, seed=seed)
+    d_t = detect(twin, model, frame, rig, search.fit_params, p, seed=seed, grey_frame=grey_frame,
+                 value_frame=value_frame)
     if d.passed and not d_t.passed:
         return first
     return d_t, twin
@@ -364,6 +373,8 @@ def _candidate_json(c: Candidate, d: Detection, model: PhotoModel) -> dict:
         "standing": round(d.standing, 6),
         "detection_threshold": round(d.threshold, 6),
         "outer_on_target": round(d.outer_on_target, 4),
+        "appearance": round(d.appearance, 4) if np.isfinite(d.appearance) else None,
+        "body_layout": round(d.body_layout, 4) if np.isfinite(d.body_layout) else None,
         "confidence": round(d.confidence, 4),
         "source": c.source,
     }

@@ -49,6 +49,7 @@ class PhotoModel:
     mask: (H, W) uint8 target mask over the photo (255 = target), for previews.
     inner_value: (N_in,) float32 the photo's grey level at each inner point (the appearance cue,
         `vision/appearance.py`); empty for a model built without a photo (the cue is then off).
+    inner_brightness: (N_in,) float32 the photo's brightness max(B, G, R) there (`appearance.body_layout`).
     """
 
     inner_uv: np.ndarray
@@ -59,6 +60,7 @@ class PhotoModel:
     origin_px: tuple[float, float]
     mask: np.ndarray
     inner_value: np.ndarray = field(default_factory=lambda: np.zeros(0, np.float32))
+    inner_brightness: np.ndarray = field(default_factory=lambda: np.zeros(0, np.float32))
 
     def size_mm(self, alpha: float) -> tuple[float, float]:
         """Real size (width along model x, height along model y) in mm at ratio alpha (px/mm)."""
@@ -286,7 +288,7 @@ def build_photo_model(photo_bgr: np.ndarray, params: PhotoModelParams,
     `params.max_points` points the pitch is coarsened until they fit. `target_hues` marks the
     hues of the inner points and of every hue holding >= 1 % of the target's hued pixels,
     widened by `params.hue_tolerance`. `inner_value` holds the photo's grey at each inner point
-    (`appearance.photo_values`).
+    (`appearance.photo_values`), `inner_brightness` its brightness.
 
     Raises InputError when the photo is not a colour image, no target separates, or the target
     carries no hue (all grey/white/dark)."""
@@ -312,12 +314,13 @@ def build_photo_model(photo_bgr: np.ndarray, params: PhotoModelParams,
     lut = np.zeros(HUE_BINS, bool)
     for k in np.flatnonzero(present):
         lut[(k + np.arange(-params.hue_tolerance, params.hue_tolerance + 1)) % HUE_BINS] = True
-    from photoservo.vision.appearance import photo_values  # appearance imports this module
+    from photoservo.vision.appearance import brightness, photo_values  # appearance imports this module
 
     o = np.array(origin)
     return PhotoModel(inner_uv=pin - o, inner_hue=hin.astype(np.uint8), outer_uv=pout - o,
                       target_hues=lut, size_px=(float(w), float(h)), origin_px=origin, mask=mask,
-                      inner_value=photo_values(photo_bgr, pin, interval))
+                      inner_value=photo_values(photo_bgr, pin, interval),
+                      inner_brightness=photo_values(photo_bgr, pin, interval, brightness))
 
 
 def load_photo_model(path: str, params: PhotoModelParams,
