@@ -257,7 +257,9 @@ def acquisition(model: PhotoModel, left_bgr: np.ndarray, right_bgr: np.ndarray, 
 # the head-to-tail twin's refinement windows (`PoseSearch.turned_steps`), tried in turn until one
 # wins: (position +- this fraction of the depth, alpha within a factor 1 +- this). A fit displaced
 # along the body has its twin's centroid off the creature's, and the hue fitness of a creature cut
-# by foam has more than one peak along it: the wider window finds the twin there.
+# by foam has more than one peak along it: the wider window finds the twin there. The wider window
+# is listed twice on purpose: the second entry is a fresh short GA (new random population) in the
+# same window, a second chance where the first run settled on the wrong peak.
 TURNED_WINDOWS = ((0.03, 0.08), (0.06, 0.15), (0.06, 0.15))
 
 
