@@ -65,6 +65,12 @@ if TYPE_CHECKING:
 # against 2000 draws, by 0.03-0.2 (sd 0.05-0.14) from 40 draws, 0.01-0.09 (sd <= 0.08) from 160,
 # 0-0.04 (sd <= 0.035 but one 0.07) from 320
 WIDE_PLACEMENTS = 320
+# the outline check's reference: this quantile of the null placements' shares of outer points on
+# target hue. On water every placement gives 0 (as the median did); where the background holds
+# the target's hues in patches (the real pair's wood, the harbour's speckled water) a creature's
+# own surroundings vary as widely as the placements' do, and the outline can only call a share
+# a spill when the background seldom gives as much
+OUTLINE_NULL_QUANTILE = 0.9
 
 
 def confidence(contrast: float, params: EstimatorParams) -> float:
@@ -155,10 +161,11 @@ class Detection:
     itself optimises the configured combination). `null_level`: the median of `null_scores`;
     `contrast` = (score - null_level) / (1 - null_level) (module docstring). `outer_on_target`:
     the largest share, over the two cameras, of outer points S_out landing on target hue beyond
-    what the pair's own background gives, (o - o_null) / (1 - o_null) with o_null the median share
-    at the null placements (0 for a creature whose hues the water lacks; near 1 for a many-hued
-    one whose hues include the water's) — the creature's outline must end where the model's does
-    (a buoy or another species of the same colour usually spills over).
+    what the pair's own background gives, (o - o_null) / (1 - o_null) with o_null the
+    `OUTLINE_NULL_QUANTILE` quantile of the shares at the null placements (0 for a creature whose
+    hues the water lacks; near 1 for a many-hued one whose hues include the water's; in between
+    where the background holds the target's hues in patches) — the creature's outline must end
+    where the model's does (a buoy or another species of the same colour usually spills over).
     passed = contrast >= min_contrast and (outer_on_target <= max_outer_on_target or excused),
     excused = outer_on_target <= max_outer_if_appearance and appearance, body_layout >= min_appearance
     (`appearance_pair`; module docstring);
@@ -208,7 +215,7 @@ def detect(c: Candidate, model: PhotoModel, frame: StereoHue, rig: Rig, fit_para
     # (a small fit on a spot of the colour far off matches nothing at its own depth elsewhere)
     wide, _ = null_scores(c, model, frame, rig, fit_params, rng, placements=WIDE_PLACEMENTS,
                           depths_mm=(p.z_min_mm, p.z_max_mm), outer=False)
-    o_null = min(float(np.median(null_outer)), 0.99) if len(null_outer) else 0.0
+    o_null = min(float(np.quantile(null_outer, OUTLINE_NULL_QUANTILE)), 0.99) if len(null_outer) else 0.0
     o = float(outer_share(c.R_model, c.position_mm, c.alpha, model, frame, rig, fit_params)[0])
     outer = max(0.0, (o - o_null) / (1.0 - o_null))
     q = float(np.median(null)) if len(null) else 0.0
