@@ -123,14 +123,16 @@ def test_under_load_a_creature_drifting_out_of_view_is_out_of_view_not_lost():
 
 def test_the_summary_says_when_a_busy_machine_may_have_cost_the_track():
     """`track` without --json: one line when under half the frames found the creature while the
-    load average exceeded the CPU count (when the first track came, or that none did); nothing
-    when the run found it or the machine was not busy."""
+    load average exceeded the CPU count and the first track came late (after the estimate age
+    cap) or never; nothing when the run found it, the machine was not busy, or the first track
+    came promptly (a creature drifting out of a still arm's view, `--no-motion`)."""
     from photoservo.cli.track import _busy_note
 
     run = {"found_ratio": 0.03, "first_track_s": 2.87, "load_average": 9.3}
-    note = _busy_note(run, cpus=2)
+    note = _busy_note(run, cpus=2, late_s=1.0)
     assert note is not None and "load average 9.3 on 2 CPUs" in note and "came 2.9 s into the session" in note
-    assert "never came" in _busy_note({**run, "first_track_s": None}, cpus=2)
-    assert _busy_note({**run, "found_ratio": 0.98}, cpus=2) is None
-    assert _busy_note({**run, "load_average": 1.5}, cpus=2) is None
+    assert "never came" in _busy_note({**run, "first_track_s": None}, cpus=2, late_s=1.0)
+    assert _busy_note({**run, "found_ratio": 0.98}, cpus=2, late_s=1.0) is None
+    assert _busy_note({**run, "load_average": 1.5}, cpus=2, late_s=1.0) is None
+    assert _busy_note({**run, "found_ratio": 0.23, "first_track_s": 0.7}, cpus=2, late_s=1.0) is None
     assert "\n" not in note

@@ -227,7 +227,7 @@ def _report(args, sc, rec, cfg, status) -> int:
         t = s["timings_ms_median"]
         print(f"frames {s['frames']}, found {100 * s['found_ratio']:.0f} %, lost {s['lost_events']}, "
               f"acquisitions {s['acquisitions']}")
-        if (note := _busy_note(s, os.cpu_count() or 1)) is not None:
+        if (note := _busy_note(s, os.cpu_count() or 1, cfg.servo.max_estimate_age_cap_s)) is not None:
             print(note)
         if args.collect:
             print(f"collection: {_collection(s, cfg, status)}")
@@ -247,11 +247,15 @@ def _report(args, sc, rec, cfg, status) -> int:
     return EXIT_HARDWARE if s["faults"] else 0
 
 
-def _busy_note(s: dict, cpus: int) -> str | None:
+def _busy_note(s: dict, cpus: int, late_s: float) -> str | None:
     """The summary's line for a session that found the creature in under half its frames on a
-    busy machine (1-minute load average above the CPU count): when the first track came, and why
-    that can lose a drifting creature. None otherwise."""
+    busy machine (1-minute load average above the CPU count) and whose first track came later
+    than `late_s` (the servo's estimate age cap, s) or never: when it came, and why that can lose
+    a drifting creature. None otherwise (a prompt first track followed by a creature drifting out
+    of a still arm's view, `--no-motion`, is not the machine's doing)."""
     if s["found_ratio"] >= 0.5 or s["load_average"] <= cpus:
+        return None
+    if s.get("first_track_s") is not None and s["first_track_s"] <= late_s:
         return None
     first = "never came" if s.get("first_track_s") is None else f"came {s['first_track_s']:.1f} s into the session"
     return (f"note: the machine was busy (load average {s['load_average']:.1f} on {cpus} CPUs) and the first "
