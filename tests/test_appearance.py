@@ -19,12 +19,11 @@ from photoservo.vision.appearance import (
     appearance,
     correlation,
     detrended,
-    photo_values,
-    sampling_pitch,
     stereo_grey,
 )
 from photoservo.vision.fitness import stereo_hue
 from photoservo.vision.photo_model import build_photo_model
+from photoservo.vision.sampling import photo_values, sampling_pitch
 from photoservo.vision.twins import turned_about_centroid
 
 CFG = load_config()

@@ -153,7 +153,8 @@ def test_stereo_plane_fit_recovers_the_tilt(scene):
     """Tilt from the disparity gradient (vision/stereo_plane.py): from a pose whose tilt is 12 deg
     off, the plane fitted over the inner points brings the normal back within 6 deg (the rig file
     is off by the scene's calibration error, which alone tips the stereo plane by a few deg)."""
-    from photoservo.vision.stereo_plane import align_to_plane, fit_target_plane, grey
+    from photoservo.vision.sampling import grey
+    from photoservo.vision.stereo_plane import align_to_plane, fit_target_plane
 
     sc, model = scene
     R, t, alpha = truth(sc)

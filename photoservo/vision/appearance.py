@@ -35,7 +35,7 @@ photo's outline (`body_points`) — whatever hue the image has there, so that a 
 or on a float of the creature's colour is read where its body falls — and takes the worse camera.
 
 Frames: R, t model in the left camera frame (mm); alpha px/mm; images (H, W) float32 grey
-(`stereo_plane.grey`) or brightness (`brightness`).
+(`sampling.grey`) or brightness (`sampling.brightness`).
 """
 
 from __future__ import annotations
@@ -49,7 +49,7 @@ import numpy as np
 from photoservo.vision.fitness import StereoHue
 from photoservo.vision.photo_model import HUE_BINS, PhotoModel
 from photoservo.vision.rig import Rig, project_points
-from photoservo.vision.stereo_plane import _patches, grey
+from photoservo.vision.sampling import brightness, grey, image_values, sampling_pitch
 
 MIN_POINTS = 8  # a camera whose image holds fewer inner points on target hue gives no correlation
 BODY_MARGIN_PX = 1.5  # body_points: inner points at least this far (image px) inside the photo's outline
@@ -57,7 +57,7 @@ BODY_MARGIN_PX = 1.5  # body_points: inner points at least this far (image px) i
 
 @dataclass(frozen=True)
 class StereoGrey:
-    """One stereo frame as grey images (float32 (H, W), `stereo_plane.grey`)."""
+    """One stereo frame as grey images (float32 (H, W), `sampling.grey`)."""
 
     left: np.ndarray
     right: np.ndarray
@@ -68,32 +68,9 @@ def stereo_grey(left_bgr: np.ndarray, right_bgr: np.ndarray) -> StereoGrey:
     return StereoGrey(left=grey(left_bgr), right=grey(right_bgr))
 
 
-def brightness(bgr: np.ndarray) -> np.ndarray:
-    """float32 brightness V = max(B, G, R) of a BGR image (HSV's value)."""
-    b, g, r = cv2.split(bgr)
-    return cv2.max(cv2.max(b, g), r).astype(np.float32)
-
-
 def stereo_value(left_bgr: np.ndarray, right_bgr: np.ndarray) -> StereoGrey:
     """Brightness images (`brightness`) of a stereo pair (BGR uint8) for `body_layout`."""
     return StereoGrey(left=brightness(left_bgr), right=brightness(right_bgr))
-
-
-def sampling_pitch(uv: np.ndarray) -> float:
-    """The grid pitch (px) of the photo-model's points (`photo_model._grid`): the smallest gap
-    between distinct column offsets of the inner points (1.0 when the points are not a grid)."""
-    x = np.unique(np.round(np.asarray(uv, dtype=np.float64)[:, 0], 3))
-    gaps = np.diff(x)
-    return float(gaps.min()) if gaps.size else 1.0
-
-
-def photo_values(photo_bgr: np.ndarray, points_px: np.ndarray, pitch_px: float, plane=grey) -> np.ndarray:
-    """`PhotoModel.inner_value`: the photo's grey level at each inner point (photo px), from the
-    photo blurred by a Gaussian of sigma half a sampling pitch (each point stands for its cell of
-    the grid, not for one pixel); `plane` = `brightness`: `PhotoModel.inner_brightness`. float32 (N,)."""
-    g = plane(photo_bgr)
-    g = cv2.GaussianBlur(g, (0, 0), max(0.5, 0.5 * pitch_px))
-    return _patches(g, np.asarray(points_px, dtype=np.float64), 0)[0][:, 0, 0].astype(np.float32)
 
 
 def detrended(values: np.ndarray, uv: np.ndarray) -> np.ndarray:
@@ -110,27 +87,6 @@ def correlation(a: np.ndarray, b: np.ndarray) -> float:
     b = np.asarray(b, dtype=np.float64) - np.mean(b)
     den = math.sqrt(float(a @ a) * float(b @ b))
     return float(a @ b) / den if den > 1e-9 else math.nan
-
-
-def image_values(uv: np.ndarray, grey: np.ndarray, sigma_px: float) -> tuple[np.ndarray, np.ndarray]:
-    """Grey level (bilinear) at image points uv (N, 2) px, the image blurred by a Gaussian of
-    sigma `sigma_px` (only the box around the points is blurred). Returns (values (N,), inside (N,))."""
-    H, W = grey.shape
-    ok = np.isfinite(uv).all(axis=1)
-    ok &= (uv[:, 0] >= 0) & (uv[:, 0] <= W - 1) & (uv[:, 1] >= 0) & (uv[:, 1] <= H - 1)
-    vals = np.zeros(len(uv), np.float64)
-    if not ok.any():
-        return vals, ok
-    m = int(math.ceil(3 * sigma_px)) + 2
-    x0, y0 = (max(0, int(np.floor(uv[ok, k].min())) - m) for k in (0, 1))
-    x1, y1 = min(W, int(np.ceil(uv[ok, 0].max())) + m + 1), min(H, int(np.ceil(uv[ok, 1].max())) + m + 1)
-    roi = np.ascontiguousarray(grey[y0:y1, x0:x1], dtype=np.float32)
-    if sigma_px >= 0.3:
-        roi = cv2.GaussianBlur(roi, (0, 0), sigma_px)
-    p, inside = _patches(roi, uv[ok] - (x0, y0), 0)
-    vals[ok] = p[:, 0, 0]
-    ok[ok] = inside
-    return vals, ok
 
 
 def on_target(uv: np.ndarray, hue: np.ndarray, target_hues: np.ndarray) -> np.ndarray:

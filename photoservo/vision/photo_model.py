@@ -17,6 +17,7 @@ import cv2
 import numpy as np
 
 from photoservo.errors import InputError
+from photoservo.vision.sampling import brightness, photo_values
 
 HUE_BINS = 180
 NO_HUE = 255  # marks a pixel too grey or too dark to carry a hue
@@ -288,7 +289,7 @@ def build_photo_model(photo_bgr: np.ndarray, params: PhotoModelParams,
     `params.max_points` points the pitch is coarsened until they fit. `target_hues` marks the
     hues of the inner points and of every hue holding >= 1 % of the target's hued pixels,
     widened by `params.hue_tolerance`. `inner_value` holds the photo's grey at each inner point
-    (`appearance.photo_values`), `inner_brightness` its brightness.
+    (`sampling.photo_values`), `inner_brightness` its brightness.
 
     Raises InputError when the photo is not a colour image, no target separates, or the target
     carries no hue (all grey/white/dark)."""
@@ -314,8 +315,6 @@ def build_photo_model(photo_bgr: np.ndarray, params: PhotoModelParams,
     lut = np.zeros(HUE_BINS, bool)
     for k in np.flatnonzero(present):
         lut[(k + np.arange(-params.hue_tolerance, params.hue_tolerance + 1)) % HUE_BINS] = True
-    from photoservo.vision.appearance import brightness, photo_values  # appearance imports this module
-
     o = np.array(origin)
     return PhotoModel(inner_uv=pin - o, inner_hue=hin.astype(np.uint8), outer_uv=pout - o,
                       target_hues=lut, size_px=(float(w), float(h)), origin_px=origin, mask=mask,

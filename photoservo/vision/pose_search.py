@@ -47,7 +47,8 @@ from photoservo.vision.fitness import FitnessParams, StereoHue, fitness
 from photoservo.vision.ga import GA, GAParams, Region
 from photoservo.vision.photo_model import HUE_BINS, PhotoModel
 from photoservo.vision.rig import Rig
-from photoservo.vision.stereo_plane import align_to_plane, fit_target_plane, grey
+from photoservo.vision.sampling import grey
+from photoservo.vision.stereo_plane import align_to_plane, fit_target_plane
 from photoservo.vision.twins import alternatives, turned_about_centroid
 
 if TYPE_CHECKING:

@@ -20,6 +20,7 @@ import numpy as np
 
 from photoservo.vision.photo_model import PhotoModel
 from photoservo.vision.rig import Rig, project_points
+from photoservo.vision.sampling import patches
 
 
 @dataclass(frozen=True)
@@ -32,25 +33,6 @@ class PlaneFit:
     point: np.ndarray
     inliers: int
     rms_mm: float
-
-
-def _patches(img: np.ndarray, uv: np.ndarray, half: int) -> tuple[np.ndarray, np.ndarray]:
-    """Bilinearly sampled grey patches (..., k, k), k = 2 half + 1, centred on sub-pixel positions
-    uv (..., 2); `ok` where the whole patch lies inside the image."""
-    H, W = img.shape
-    uv = np.nan_to_num(np.asarray(uv, dtype=np.float64), nan=-1e6)
-    ok = (uv[..., 0] >= half) & (uv[..., 0] <= W - 1 - half) & (uv[..., 1] >= half) & (uv[..., 1] <= H - 1 - half)
-    d = np.arange(-half, half + 1, dtype=np.float64)
-    mx = (uv[..., 0][..., None, None] + d[None, :]).astype(np.float32)
-    my = (uv[..., 1][..., None, None] + d[:, None]).astype(np.float32)
-    mx, my = np.broadcast_arrays(mx, my)
-    shape, n = mx.shape, mx.size
-    cols = 4096  # cv2.remap wants maps narrower than 32767: lay the samples out in rows
-    pad = (-n) % cols
-    fx = np.concatenate([mx.ravel(), np.zeros(pad, np.float32)]).reshape(-1, cols)
-    fy = np.concatenate([my.ravel(), np.zeros(pad, np.float32)]).reshape(-1, cols)
-    out = cv2.remap(img, fx, fy, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
-    return out.ravel()[:n].reshape(shape), ok
 
 
 def _zero_mean_unit(p: np.ndarray) -> np.ndarray:
@@ -77,14 +59,14 @@ def fit_target_plane(R: np.ndarray, t: np.ndarray, alpha: float, model: PhotoMod
         X, uv_l = X[hit], uv_l[hit]
         if len(X) < min_points:
             return None
-    pl, ok_l = _patches(left_grey, uv_l, half)
+    pl, ok_l = patches(left_grey, uv_l, half)
     zl = _zero_mean_unit(pl)
     lam = np.linspace(1.0 - search, 1.0 + search, steps)
     Xs = X[:, None, :] * lam[None, :, None]  # (N, S, 3) along each left ray
     uv_r = project_points(Xs @ rig.R.T + rig.T, rig.right)
 
     def ncc_at(dv: float, idx: np.ndarray) -> np.ndarray:
-        pr, ok_r = _patches(right_grey, uv_r[idx] + [0.0, dv], half)
+        pr, ok_r = patches(right_grey, uv_r[idx] + [0.0, dv], half)
         return np.where(ok_r, np.einsum("nij,nsij->ns", zl[idx], _zero_mean_unit(pr)), -1.0)
 
     # A calibration error shifts the right image off the computed epipolar lines (0.1 deg of
@@ -153,8 +135,3 @@ def align_to_plane(R: np.ndarray, t: np.ndarray, plane: PlaneFit) -> tuple[np.nd
     denom = n1 @ t
     t2 = t * ((n1 @ plane.point) / denom) if abs(denom) > 1e-9 else t.copy()
     return R2, t2
-
-
-def grey(bgr: np.ndarray) -> np.ndarray:
-    """float32 grey image for `fit_target_plane`."""
-    return cv2.cvtColor(bgr, cv2.COLOR_BGR2GRAY).astype(np.float32)
