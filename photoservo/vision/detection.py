@@ -71,6 +71,8 @@ WIDE_PLACEMENTS = 320
 # own surroundings vary as widely as the placements' do, and the outline can only call a share
 # a spill when the background seldom gives as much
 OUTLINE_NULL_QUANTILE = 0.9
+# batches of 8 x placements random origins `null_scores` draws at most to find its placements
+NULL_DRAW_BATCHES = 16
 
 
 def confidence(contrast: float, params: EstimatorParams) -> float:
@@ -98,12 +100,47 @@ def null_scores(c: Candidate, model: PhotoModel, frame: StereoHue, rig: Rig, fit
     K = rig.left.K
     t = np.asarray(c.position_mm, float)
     z = float(t[2])
+    length = K[0, 0] * max(model.size_px) / (c.alpha * z)  # apparent longest side (px)
+    uv, zs = np.zeros((0, 2)), np.zeros(0)
+    # a near model leaves little room off it and inside both images (under 1 % of the draws may
+    # land there): draw again until `placements` do (at most NULL_DRAW_BATCHES batches; most models
+    # fill them from the first, as the same draws did before), so its null is not one or two
+    # placements or none (an empty null made q = 0 and the contrast the score itself)
+    for _ in range(NULL_DRAW_BATCHES):
+        more_uv, more_zs = _null_origins(t, length, rig, rng, 8 * placements, depths_mm)
+        uv, zs = np.concatenate([uv, more_uv]), np.concatenate([zs, more_zs])
+        if len(uv) >= placements:
+            break
+    uv, zs = uv[:placements], zs[:placements]
+    if not len(uv):
+        return np.zeros(0), np.zeros(0)
+    n = len(uv) * jitters
+    uv = np.repeat(uv, jitters, axis=0) + rng.uniform(-0.2, 0.2, (n, 2)) * length
+    zs = np.repeat(zs, jitters)
+    psi = np.repeat(rng.uniform(-math.pi, math.pi, len(uv) // jitters), jitters) + rng.uniform(-0.35, 0.35, n)
+    R = np.asarray(c.R)[None] @ rotation_from_heading_tilt(psi, np.zeros(n), np.zeros(n))
+    R = aspect_map(R, np.full(n, c.aspect))
+    pos = np.column_stack([(uv[:, 0] - K[0, 2]) * zs / K[0, 0], (uv[:, 1] - K[1, 2]) * zs / K[1, 1], zs])
+    alpha = c.alpha * z / zs * rng.uniform(0.9, 1.1, n)
+    f = fitness(R, pos, alpha, model, frame, rig, strict)
+    shares = outer_share(R, pos, alpha, model, frame, rig, fit_params) if outer else np.zeros(0)
+    return f.reshape(-1, jitters).max(axis=1), shares
+
+
+def _null_origins(t: np.ndarray, length: float, rig: Rig, rng: np.random.Generator, draws: int,
+                  depths_mm: tuple[float, float] | None) -> tuple[np.ndarray, np.ndarray]:
+    """Of `draws` random model origins (left-image pixels, depth), those `null_scores` may use:
+    at least one apparent model length `length` (px; at most 0.4 of the image's shorter side) off
+    the candidate at `t` (left camera, mm) and inside the right image too (and off the candidate
+    there when each has its own depth, inverse depth uniform in `depths_mm`). Returns uv (N, 2)
+    px and depths (N,) mm."""
+    K = rig.left.K
+    z = float(t[2])
     u0 = K[0, 0] * t[0] / z + K[0, 2]
     v0 = K[1, 1] * t[1] / z + K[1, 2]
-    length = K[0, 0] * max(model.size_px) / (c.alpha * z)  # apparent longest side (px)
     W, H = rig.left.width, rig.left.height
     m = 0.5 * min(length, 0.8 * min(W, H))
-    uv = rng.uniform([m, m], [max(m + 1, W - m), max(m + 1, H - m)], size=(8 * placements, 2))
+    uv = rng.uniform([m, m], [max(m + 1, W - m), max(m + 1, H - m)], size=(draws, 2))
     # off the footprint; a model too large for that (longer than ~0.4 of the image) at least that far
     far = np.hypot(uv[:, 0] - u0, uv[:, 1] - v0) >= min(length, 0.4 * min(W, H))
     zs = np.full(len(uv), z)
@@ -120,20 +157,7 @@ def null_scores(c: Candidate, model: PhotoModel, frame: StereoHue, rig: Rig, fit
         tr = rig.R @ t + rig.T
         seen &= np.hypot(ur - (Kr[0, 0] * tr[0] / tr[2] + Kr[0, 2]),
                          vr - (Kr[1, 1] * tr[1] / tr[2] + Kr[1, 2])) >= min(length, 0.4 * min(W, H))
-    uv, zs = uv[seen][:placements], zs[seen][:placements]
-    if not len(uv):
-        return np.zeros(0), np.zeros(0)
-    n = len(uv) * jitters
-    uv = np.repeat(uv, jitters, axis=0) + rng.uniform(-0.2, 0.2, (n, 2)) * length
-    zs = np.repeat(zs, jitters)
-    psi = np.repeat(rng.uniform(-math.pi, math.pi, len(uv) // jitters), jitters) + rng.uniform(-0.35, 0.35, n)
-    R = np.asarray(c.R)[None] @ rotation_from_heading_tilt(psi, np.zeros(n), np.zeros(n))
-    R = aspect_map(R, np.full(n, c.aspect))
-    pos = np.column_stack([(uv[:, 0] - K[0, 2]) * zs / K[0, 0], (uv[:, 1] - K[1, 2]) * zs / K[1, 1], zs])
-    alpha = c.alpha * z / zs * rng.uniform(0.9, 1.1, n)
-    f = fitness(R, pos, alpha, model, frame, rig, strict)
-    shares = outer_share(R, pos, alpha, model, frame, rig, fit_params) if outer else np.zeros(0)
-    return f.reshape(-1, jitters).max(axis=1), shares
+    return uv[seen], zs[seen]
 
 
 def placements(c: Candidate, model: PhotoModel, rig: Rig) -> float:
