@@ -260,7 +260,8 @@ def main(argv: list[str] | None = None) -> int:
         r.update(seed=1000 + i, kind=KINDS[i % 3], distractor=i % 4 == 3, split=is_split(i),
                  candidates=[{"off_pct": float(100 * np.linalg.norm(np.array(c["position_mm"]) - t_true) / t_true[2]),
                               "detection_score": c["detection_score"], "contrast": c["contrast"],
-                              "outer_on_target": c["outer_on_target"], "standing": c["standing"], "passed": c["found"]}
+                              "outer_on_target": c["outer_on_target"], "standing": c["standing"],
+                              "absent_parts": c["absent_parts"], "passed": c["found"]}
                              for c in est.candidates])
         rows.append(r)
         print(f"  scene {i:3d} {r['kind']:<5} {'other' if other else 'same ':<5} z {r['distance_mm']:6.0f} "
@@ -287,6 +288,7 @@ def main(argv: list[str] | None = None) -> int:
                       "fitness": est.fitness, "detection_score": est.detection_score, "contrast": est.contrast,
                       "seconds": est.seconds,
                       "outer_on_target": est.candidates[0]["outer_on_target"] if est.candidates else None,
+                      "absent_parts": est.candidates[0]["absent_parts"] if est.candidates else None,
                       "distractors": [d["kind"] for d in sc.truth["distractors"]]})
         print(f"  null {j:3d} {'look-alike' if distractor else 'empty':<10}: {'FALSE POSITIVE' if est.found else 'not found'} "
               f"best score={est.detection_score if est.detection_score is not None else float('nan'):.3f} "

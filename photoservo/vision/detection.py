@@ -31,6 +31,12 @@ passes when the brightness layout inside it is the photo's by both appearance cu
 (`vision/appearance.py`, `appearance_pair`): the grey correlation over the inner points on
 target hue and the body's brightness correlation, each at least `min_appearance`. Both are
 Pearson correlations, invariant to the image's gain and offset.
+
+A candidate must also have its parts there (`vision/parts.py`): the photo-model's inner points
+fall into compact parts, and at most `max_absent_parts` of the parts that land on hue may have
+fewer than half their points on a target hue — a crab's model squeezed onto a squid or a buoy of
+its colour matches on its body while its legs lie on water; foam over a creature leaves its
+parts without hue, which does not count against it.
 """
 
 from __future__ import annotations
@@ -52,6 +58,7 @@ from photoservo.vision.fitness import (
     counts_reference,
     fitness,
 )
+from photoservo.vision.parts import absent_parts
 from photoservo.vision.photo_model import PhotoModel
 from photoservo.vision.pose_search import Candidate, aspect_map
 from photoservo.vision.rig import Rig
@@ -190,7 +197,8 @@ class Detection:
     hues the water lacks; near 1 for a many-hued one whose hues include the water's; in between
     where the background holds the target's hues in patches) — the creature's outline must end
     where the model's does (a buoy or another species of the same colour usually spills over).
-    passed = contrast >= min_contrast and (outer_on_target <= max_outer_on_target or excused),
+    passed = contrast >= min_contrast and (outer_on_target <= max_outer_on_target or excused)
+             and not absent_parts > max_absent_parts,
     excused = outer_on_target <= max_outer_if_appearance and appearance, body_layout >= min_appearance
     (`appearance_pair`; module docstring);
     confidence = logistic((contrast - min_contrast) / confidence_scale)
@@ -200,7 +208,8 @@ class Detection:
     any depth (at least the null's median), n = `placements` (module docstring): how the
     candidate compares with the best a search of this pair at its apparent scale finds
     elsewhere; candidates are ranked by it. `appearance`, `body_layout`: `appearance_pair` (nan
-    when not measured)."""
+    when not measured). `absent_parts`: the share of the model's parts absent in the worse camera
+    (`vision/parts.py`; nan when no part lands on hue)."""
 
     score: float
     null_level: float
@@ -212,6 +221,7 @@ class Detection:
     standing: float
     appearance: float = math.nan
     body_layout: float = math.nan
+    absent_parts: float = math.nan
 
 
 def appearance_pair(c: Candidate, model: PhotoModel, frame: StereoHue, grey_frame: StereoGrey,
@@ -227,10 +237,11 @@ def appearance_pair(c: Candidate, model: PhotoModel, frame: StereoHue, grey_fram
 
 def detect(c: Candidate, model: PhotoModel, frame: StereoHue, rig: Rig, fit_params: FitnessParams,
            p: EstimatorParams, seed: int = 0, grey_frame: StereoGrey | None = None,
-           value_frame: StereoGrey | None = None) -> Detection:
+           value_frame: StereoGrey | None = None, parts: np.ndarray | None = None) -> Detection:
     """The detection test of one candidate (see `Detection`); `seed` draws the null placements;
     `grey_frame` / `value_frame` (`appearance.stereo_grey` / `stereo_value` of the pair): the
-    appearance cues that may excuse an outline spill (module docstring; without them, none)."""
+    appearance cues that may excuse an outline spill (module docstring; without them, none);
+    `parts`: the model's `parts.model_parts` (computed when None)."""
     strict = dataclasses.replace(fit_params, combine="min")
     score = float(fitness(c.R_model, c.position_mm, c.alpha, model, frame, rig, strict)[0])
     rng = np.random.default_rng(seed)
@@ -252,8 +263,10 @@ def detect(c: Candidate, model: PhotoModel, frame: StereoHue, rig: Rig, fit_para
         look = appearance_pair(c, model, frame, grey_frame, value_frame, rig)
     # an outline that spills is excused when the layout inside is the photo's by both cues (nan: no)
     excused = outer <= p.max_outer_if_appearance and bool(np.all(np.asarray(look) >= p.min_appearance))
-    passed = contrast >= p.min_contrast and (outer <= p.max_outer_on_target or excused)
+    absent = absent_parts(c.R_model, c.position_mm, c.alpha, model, frame, rig, parts)
+    passed = (contrast >= p.min_contrast and (outer <= p.max_outer_on_target or excused)
+              and not absent > p.max_absent_parts)  # nan (no part on hue): not a reason to reject
     outline = 1.0 if excused else 1.0 / (1.0 + math.exp(-(p.max_outer_on_target - outer) / 0.02))
     return Detection(score=score, null_level=q, contrast=contrast, outer_on_target=outer, passed=bool(passed),
                      confidence=confidence(contrast, p) * outline, threshold=q + p.min_contrast * (1.0 - q),
-                     standing=standing, appearance=look[0], body_layout=look[1])
+                     standing=standing, appearance=look[0], body_layout=look[1], absent_parts=absent)

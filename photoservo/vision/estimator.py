@@ -40,6 +40,7 @@ from photoservo.vision.detection import Detection, detect
 from photoservo.vision.fitness import FitnessParams, StereoHue, stereo_hue
 from photoservo.vision.ga import GAParams
 from photoservo.vision.hue_layout import layout_pairs
+from photoservo.vision.parts import model_parts
 from photoservo.vision.photo_model import HUE_BINS, PhotoModel
 from photoservo.vision.pose_search import Candidate, PoseSearch, drive
 from photoservo.vision.rig import Rig
@@ -83,6 +84,7 @@ class EstimatorParams:
     max_outer_on_target: float  # detection also needs at most this share of outer points on target hue
     max_outer_if_appearance: float  # ...or at most this share when both appearance cues reach min_appearance
     min_appearance: float  # appearance cues (vision/appearance.py) that excuse an outline spill
+    max_absent_parts: float  # detection also needs at most this share of the model's parts absent (vision/parts.py)
     passed_standing_ratio: float  # a candidate that passes ranks first when it stands >= this x the top, which fails
     twin_appearance: bool  # let the appearance cue choose between the first candidate and its head-to-tail twin
     twin_min_appearance: float  # ...the twin is taken when its appearance score is at least this,
@@ -111,6 +113,7 @@ class EstimatorParams:
             ("twin_appearance_margin", self.twin_appearance_margin >= 0, "must be >= 0"),
             ("twin_fitness_tol", self.twin_fitness_tol >= 0, "must be >= 0"),
             ("max_outer_if_appearance", 0.0 <= self.max_outer_if_appearance <= 1.0, "must be in [0, 1]"),
+            ("max_absent_parts", 0.0 <= self.max_absent_parts <= 1.0, "must be in [0, 1]"),
             ("min_generations", 0 <= self.min_generations <= self.max_generations,
              "need 0 <= min_generations <= max_generations"),
             ("patience", self.patience >= 1, "must be >= 1"),
@@ -242,7 +245,8 @@ def acquisition(model: PhotoModel, left_bgr: np.ndarray, right_bgr: np.ndarray, 
             firsts[lead] = c
         yield search.ga.generation - g0
     results = []
-    looks = dict(grey_frame=stereo_grey(left_bgr, right_bgr), value_frame=stereo_value(left_bgr, right_bgr))
+    looks = dict(grey_frame=stereo_grey(left_bgr, right_bgr), value_frame=stereo_value(left_bgr, right_bgr),
+                 parts=model_parts(model.inner_uv))
     for (name, search), c in zip(islands, firsts):
         if np.isfinite(c.fitness):
             results.append((detect(c, model, frame, rig, fit_params, p, seed=seed, **looks),
@@ -377,6 +381,7 @@ def _candidate_json(c: Candidate, d: Detection, model: PhotoModel) -> dict:
         "outer_on_target": round(d.outer_on_target, 4),
         "appearance": round(d.appearance, 4) if np.isfinite(d.appearance) else None,
         "body_layout": round(d.body_layout, 4) if np.isfinite(d.body_layout) else None,
+        "absent_parts": round(d.absent_parts, 4) if np.isfinite(d.absent_parts) else None,
         "confidence": round(d.confidence, 4),
         "source": c.source,
     }

@@ -52,6 +52,7 @@ import numpy as np
 from photoservo.errors import InputError
 from photoservo.vision.photo_model import (
     HUE_BINS,
+    NO_HUE,
     PhotoModel,
     hue_distance,
     hue_image,
@@ -174,6 +175,20 @@ def _sample(uv: np.ndarray, hue: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     ci = np.where(inside, c[..., 0], 0).astype(np.intp)
     ri = np.where(inside, c[..., 1], 0).astype(np.intp)
     return hue[ri, ci].astype(np.int16), inside
+
+
+def inner_hues(R: np.ndarray, t: np.ndarray, alpha: float, model: PhotoModel, frame: StereoHue,
+               rig: Rig) -> np.ndarray:
+    """The image hue under each inner point S_in of ONE pose, as the fitness reads it (nearest
+    pixel): (2, N_in) int16, rows left and right camera, NO_HUE where the pixel carries no hue or
+    the point falls outside the image. R (3, 3) the model's linear map, t (3,) mm in the left
+    camera frame, alpha px/mm."""
+    p = project_model(R, t, alpha, model, rig)
+    rows = []
+    for uv, hue in ((p.inner_left, frame.left), (p.inner_right, frame.right)):
+        h, inside = _sample(uv, hue)
+        rows.append(np.where(inside[0], h[0], NO_HUE))
+    return np.stack(rows).astype(np.int16)
 
 
 def _count_camera(uv_in: np.ndarray, uv_out: np.ndarray, hue: np.ndarray, model: PhotoModel,

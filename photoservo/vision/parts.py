@@ -1,0 +1,103 @@
+"""Are all of the creature's parts there? The detection's check that the hue agreement of a
+candidate is spread over the whole photo-model, not gathered on part of it.
+
+The fitness (method step 3) sums the inner points S_in that land on their own hue. A model of
+another shape laid over a look-alike of the creature's colour — a crab's photo-model squeezed
+onto a squid's mantle or a buoy — gathers most of that sum on its body while its legs and claws
+fall on water: a fitness, a contrast to its null and an outline like a creature's, but whole
+parts of the photo-model absent. A creature under foam, glare or a shadow loses parts too, but
+there its inner points land on pixels without hue (`NO_HUE`), which say nothing; on water they
+land on the water's hue, which says "not here".
+
+So the photo-model's inner points are divided once into `PARTS` compact parts (`model_parts`:
+k-means over the points' photo offsets, from a deterministic farthest-point start), and at a
+pose, per camera, a part counts when enough of its points land on hue (`MIN_HUED_SHARE` of them,
+at least `MIN_POINTS`), and is absent when fewer than half of those land on one of the target's
+hues (`PhotoModel.target_hues`: any hue of the photo, within the tolerance):
+
+    absent_c = #(parts counted in camera c with on_target / hued < 1/2) / #(parts counted in c)
+    absent   = max over the cameras that count any part                      (0..1; nan if none)
+
+Any target hue, not the point's own: the light shifts the hue across a real body (a shaded
+flank, a gilded highlight) and moves a part's points onto the creature's other hues, not onto
+the water's; on the harbour generator the point's own hue called a third to a half of a lit
+squid's or crab's parts absent at the true pose. Each part is judged against itself (a share of
+its own hued points), so the decision does not rest on a fitness level of one renderer. Where
+the water carries one of the target's hues (a many-hued fish) parts on water count as present:
+the check then lets through what it cannot judge. Detection (`vision/detection.py`) rejects a
+candidate with `absent` above `[estimator] max_absent_parts`.
+
+Frames: inner points in photo px offsets (`PhotoModel.inner_uv`); poses as in `fitness`.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from photoservo.vision.fitness import StereoHue, inner_hues
+from photoservo.vision.photo_model import HUE_BINS, PhotoModel
+from photoservo.vision.rig import Rig
+
+PARTS = 12  # parts of the photo-model (a crab's body, claws and leg groups; a fish's head, fins, tail)
+MIN_HUED_SHARE = 0.3  # a part counts in a camera when at least this share of its points land on hue...
+MIN_POINTS = 3  # ...and at least this many
+
+
+def model_parts(inner_uv: np.ndarray, n_parts: int = PARTS, iterations: int = 30) -> np.ndarray:
+    """(N_in,) int part label of each inner point: k-means (Lloyd) over the photo offsets uv
+    (N_in, 2) px into min(n_parts, N_in) compact parts, started from the point nearest the
+    centroid and then each point farthest from the centres so far (deterministic)."""
+    uv = np.asarray(inner_uv, dtype=np.float64).reshape(-1, 2)
+    n = min(n_parts, len(uv))
+    if n == 0:
+        return np.zeros(0, np.intp)
+    first = int(np.argmin(((uv - uv.mean(axis=0)) ** 2).sum(axis=1)))
+    centres = [uv[first]]
+    d = ((uv - centres[0]) ** 2).sum(axis=1)
+    for _ in range(1, n):
+        centres.append(uv[int(np.argmax(d))])
+        d = np.minimum(d, ((uv - centres[-1]) ** 2).sum(axis=1))
+    C = np.array(centres)
+    labels = np.zeros(len(uv), np.intp)
+    for _ in range(iterations):
+        labels = ((uv[:, None, :] - C[None]) ** 2).sum(axis=-1).argmin(axis=1)
+        counts = np.bincount(labels, minlength=n)
+        sums = np.stack([np.bincount(labels, weights=uv[:, k], minlength=n) for k in (0, 1)], axis=1)
+        new = np.where(counts[:, None] > 0, sums / np.maximum(counts, 1)[:, None], C)
+        if np.allclose(new, C):
+            break
+        C = new
+    return labels
+
+
+def absent_share(hued: np.ndarray, on_target: np.ndarray, labels: np.ndarray) -> float:
+    """The share of parts absent (module docstring) from per-camera (C, N_in) bool arrays `hued`
+    (the point lands on a pixel with hue) and `on_target` (...on a target hue) and the part
+    `labels` (`model_parts`): the worse camera's share; nan when no camera counts a part."""
+    hued = np.atleast_2d(np.asarray(hued, bool))
+    agrees = np.atleast_2d(np.asarray(on_target, bool)) & hued
+    n = int(labels.max()) + 1 if len(labels) else 0
+    size = np.bincount(labels, minlength=n)
+    worst = math.nan
+    for h, a in zip(hued, agrees):
+        nh = np.bincount(labels, weights=h, minlength=n)
+        na = np.bincount(labels, weights=a, minlength=n)
+        counted = (nh >= np.maximum(MIN_POINTS, MIN_HUED_SHARE * size)) & (size > 0)
+        if not counted.any():
+            continue
+        share = float(np.mean(na[counted] < 0.5 * nh[counted]))
+        worst = share if math.isnan(worst) else max(worst, share)
+    return worst
+
+
+def absent_parts(R: np.ndarray, t: np.ndarray, alpha: float, model: PhotoModel, frame: StereoHue, rig: Rig,
+                 labels: np.ndarray | None = None) -> float:
+    """`absent_share` of one pose: R (3, 3) the model's linear map (`Candidate.R_model`), t (3,)
+    mm in the left camera frame, alpha px/mm; `labels` from `model_parts` (computed when None)."""
+    h = inner_hues(R, t, alpha, model, frame, rig)
+    hued = h < HUE_BINS
+    lut = np.zeros(256, bool)
+    lut[:HUE_BINS] = np.asarray(model.target_hues, bool)
+    return absent_share(hued, lut[h], model_parts(model.inner_uv) if labels is None else labels)
