@@ -120,12 +120,12 @@ def errors(est, truth: dict, cpu: float = math.nan) -> dict:
     return row
 
 
-def miss_kind(row: dict, min_contrast: float, max_outer: float) -> str | None:
+def miss_kind(row: dict, min_contrast: float, max_outer: float, max_absent: float = 1.0) -> str | None:
     """Where a target scene that is not a success ends (None for a success), from its candidate
     list: no candidate within 5 % of the distance from the truth (the seeds or the GA never got
     there), the best-standing candidate within 5 % rejected by detection (its contrast below
-    min_contrast, its outline share above max_outer, or both), or passing but ranked behind
-    another."""
+    min_contrast, its outline share above max_outer, more than max_absent of its parts absent:
+    vision/parts.py), or passing but ranked behind another."""
     if row["success"]:
         return None
     near = [c for c in row["candidates"] if c["off_pct"] <= 100 * SUCCESS_POS_FRAC]
@@ -134,8 +134,8 @@ def miss_kind(row: dict, min_contrast: float, max_outer: float) -> str | None:
     c = max(near, key=lambda c: c["standing"])
     if c["passed"]:
         return "within 5 %, passes, ranked behind another"
-    why = [w for w, bad in (("contrast", c["contrast"] < min_contrast), ("outline", c["outer_on_target"] > max_outer))
-           if bad]
+    why = [w for w, bad in (("contrast", c["contrast"] < min_contrast), ("outline", c["outer_on_target"] > max_outer),
+                            ("parts", (c.get("absent_parts") or 0.0) > max_absent)) if bad]
     return "within 5 %, rejected by " + " and ".join(why)
 
 
@@ -374,7 +374,8 @@ def main(argv: list[str] | None = None) -> int:
 
     misses: dict[str, list[int]] = {}
     for r in rows:
-        kind = miss_kind(r, cfg.estimator.min_contrast, cfg.estimator.max_outer_on_target)
+        kind = miss_kind(r, cfg.estimator.min_contrast, cfg.estimator.max_outer_on_target,
+                         cfg.estimator.max_absent_parts)
         if kind is not None:
             misses.setdefault(kind, []).append(r["seed"])
 
