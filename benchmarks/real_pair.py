@@ -39,7 +39,7 @@ import numpy as np
 from photoservo.config import load_config
 from photoservo.fileio import write_text_atomic
 from photoservo.sim.middlebury import real_cases
-from photoservo.vision.estimator import estimate
+from photoservo.vision.estimator import estimate, search_frame
 from photoservo.vision.pose_search import GeneSpace, PoseSearch
 from photoservo.vision.fitness import fitness, stereo_hue
 from photoservo.vision.rig import project_points
@@ -53,7 +53,8 @@ def null_fitness(case, cfg, n: int, seed: int) -> np.ndarray:
     space = GeneSpace(cfg.estimator.genes, case.rig, case.model, cfg.estimator)
     g = space.full_region().sample(np.random.default_rng(seed), 4 * n)
     R, t, alpha, valid = space.decode(g)
-    frame = stereo_hue(case.left, case.right, cfg.fitness)
+    frame = search_frame(stereo_hue(case.left, case.right, cfg.fitness), case.model, case.left, case.right,
+                         cfg.estimator)
     f = fitness(R[valid][:n], t[valid][:n], alpha[valid][:n], case.model, frame, case.rig, cfg.fitness)
     return f
 
@@ -95,7 +96,9 @@ def window_search(case, cfg, frame, seed: int) -> dict:
 
 def run_case(case, cfg, seed: int) -> dict:
     tr = case.truth
-    frame = stereo_hue(case.left, case.right, cfg.fitness)
+    # the frame the estimator scores on (with the pair's chroma where the contour rule applies)
+    frame = search_frame(stereo_hue(case.left, case.right, cfg.fitness), case.model, case.left, case.right,
+                         cfg.estimator)
     t_true = np.array(tr["position_mm"])
     f_truth = float(fitness(np.eye(3), t_true, tr["alpha_px_per_mm"], case.model, frame, case.rig, cfg.fitness)[0])
     c0 = time.process_time()

@@ -181,7 +181,9 @@ class FrameEncoding:
 
 
 def copied(obj: Any) -> Any:
-    """A copy of a dataclass of arrays (the fitness input) that the caller cannot change."""
+    """A copy of a dataclass of arrays (the fitness input) that the caller cannot change (a field
+    left None stays None)."""
     return dataclasses.replace(obj, **{f.name: np.array(getattr(obj, f.name), copy=True)
-                                       for f in dataclasses.fields(obj) if f.init})
+                                       for f in dataclasses.fields(obj)
+                                       if f.init and getattr(obj, f.name) is not None})
 

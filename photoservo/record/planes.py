@@ -116,9 +116,12 @@ def grey_near_target(bgr: np.ndarray, hue: np.ndarray, target_hues: np.ndarray |
 def tracker_planes(fitness_input: Any, left_bgr: np.ndarray, right_bgr: np.ndarray,
                    lut: np.ndarray | None, target_hues: np.ndarray | None) -> dict[str, np.ndarray]:
     """Every plane the tracker reads (module docstring), by name: `fitness/<field>` for each
-    array field of the fitness input (hue fields through `lut` when given), `grey/left|right`."""
+    array field of the fitness input (hue fields through `lut` when given; a field left None is
+    not recorded), `grey/left|right`."""
     planes = {}
     for f in dataclasses.fields(fitness_input):
+        if getattr(fitness_input, f.name) is None:  # an optional plane not in use (StereoHue.chroma)
+            continue
         a = np.asarray(getattr(fitness_input, f.name))
         hue_plane = lut is not None and f.name in HUE_FIELDS and a.dtype == np.uint8
         planes[FITNESS + f.name] = apply_lut(a, lut) if hue_plane else a
@@ -188,6 +191,8 @@ def tracker_input(planes: dict[str, np.ndarray], input_type: type) -> tuple[Any,
     fields = {}
     for f in dataclasses.fields(input_type):
         if FITNESS + f.name not in planes:
+            if f.default is None:  # an optional plane the recording did not carry
+                continue
             raise KeyError(f"fitness input plane '{f.name}'")
         fields[f.name] = np.ascontiguousarray(planes[FITNESS + f.name])
     bgr = [cv2.merge([planes[GREY + s]] * 3) for s in ("left", "right")]

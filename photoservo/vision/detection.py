@@ -50,6 +50,7 @@ import numpy as np
 
 from photoservo.geometry import rotation_from_heading_tilt
 from photoservo.vision.appearance import StereoGrey, appearance, body_layout, body_points
+from photoservo.vision.contour import TARGET_FLAT, contour_counts, contour_counts_reference
 from photoservo.vision.fitness import (
     OUT_MISMATCH,
     FitnessParams,
@@ -178,10 +179,17 @@ def placements(c: Candidate, model: PhotoModel, rig: Rig) -> float:
 
 def outer_share(R: np.ndarray, t: np.ndarray, alpha: np.ndarray, model: PhotoModel, frame: StereoHue, rig: Rig,
                 fit_params: FitnessParams) -> np.ndarray:
-    """(P,): the largest share, over the two cameras, of outer points S_out on target hue."""
-    counts = (counts_reference if fit_params.kernel == "numpy" else counts_compiled)(
-        R, t, alpha, model, frame, rig, fit_params)
-    return counts[:, :, OUT_MISMATCH].max(axis=1) / max(1, len(model.outer_uv))
+    """(P,): the largest share, over the two cameras, of outer points S_out on target hue — under
+    the contour rule (`frame.chroma` set, vision/contour.py) of those on a target hue without a
+    colour edge to their inner neighbour, where the target goes on past the outline."""
+    if frame.chroma is not None:
+        R, t, alpha = np.reshape(R, (-1, 3, 3)), np.reshape(t, (-1, 3)), np.reshape(alpha, -1).astype(float)
+        spill = (contour_counts_reference if fit_params.kernel == "numpy" else contour_counts)(
+            R, t, alpha, model, frame, rig, fit_params)[:, :, TARGET_FLAT]
+    else:
+        spill = (counts_reference if fit_params.kernel == "numpy" else counts_compiled)(
+            R, t, alpha, model, frame, rig, fit_params)[:, :, OUT_MISMATCH]
+    return spill.max(axis=1) / max(1, len(model.outer_uv))
 
 
 @dataclass(frozen=True)

@@ -36,6 +36,7 @@ import numpy as np
 
 from photoservo.errors import InputError
 from photoservo.vision.appearance import StereoGrey, appearance, stereo_grey, stereo_value
+from photoservo.vision.contour import stereo_chroma
 from photoservo.vision.detection import Detection, detect
 from photoservo.vision.fitness import FitnessParams, StereoHue, stereo_hue
 from photoservo.vision.ga import GAParams
@@ -68,6 +69,7 @@ class EstimatorParams:
     window_scale: float  # seeded window: ln s +- this
     window_grow: float  # seeded window: ln s reaches this far above the blob's (the blob may be a piece)
     layout_share: float  # seed from the hue layout when seeding.target_mask holds more than this share of hued px
+    contour_rule: bool  # where the target's hues are everywhere, the fitness judges outer points by colour edges
     group_reach: float  # blob pairs group when their gap is <= this x the sum of their half-lengths
     plane_refine: bool  # correct the tilt by a stereo plane fit over the inner points (vision/stereo_plane.py)
     plane_fitness_tol: float  # ...accepted when the re-fitted pose's fitness is at most this below the GA's
@@ -179,8 +181,7 @@ def _islands(model: PhotoModel, rig: Rig, frame: StereoHue, ga_params: GAParams,
     islands: list[tuple[str, PoseSearch]] = []
     if p.seeding and p.genes == "image":
         shape = ModelShape.of(model)
-        hued = int(np.count_nonzero(frame.left < HUE_BINS))
-        if hued and np.count_nonzero(target_mask(frame.left, model.target_hues)) > p.layout_share * hued:
+        if hues_everywhere(frame, model, p):
             # the creature's hues are everywhere (a many-hued creature, the water's hue among its
             # own; not target hues scattered by noise over water at the edge of the tolerance,
             # which target_mask leaves out): seed from where the photo's hue layout agrees (vision/hue_layout.py)
@@ -207,6 +208,25 @@ def _islands(model: PhotoModel, rig: Rig, frame: StereoHue, ga_params: GAParams,
     return islands
 
 
+def hues_everywhere(frame: StereoHue, model: PhotoModel, p: EstimatorParams) -> bool:
+    """More than `layout_share` of the left image's hued pixels lie in the model's target hues
+    (`seeding.target_mask`: not hues scattered by noise at the edge of the tolerance): hue cannot
+    bound the target in this pair (a many-hued creature in water of one of its hues; a real
+    background within the target's hue tolerance)."""
+    hued = int(np.count_nonzero(frame.left < HUE_BINS))
+    return bool(hued) and np.count_nonzero(target_mask(frame.left, model.target_hues)) > p.layout_share * hued
+
+
+def search_frame(frame: StereoHue, model: PhotoModel, left_bgr: np.ndarray, right_bgr: np.ndarray,
+                 p: EstimatorParams) -> StereoHue:
+    """The frame the acquisition scores poses on: with the pair's chroma (the contour rule,
+    vision/contour.py) where `contour_rule` is on and hue cannot bound the target
+    (`hues_everywhere`), else `frame` as it is."""
+    if p.contour_rule and frame.chroma is None and hues_everywhere(frame, model, p):
+        return dataclasses.replace(frame, chroma=stereo_chroma(left_bgr, right_bgr))
+    return frame
+
+
 @dataclass(frozen=True)
 class Acquired:
     """What an acquisition ends with: every island's best with its detection test, ranked by
@@ -226,6 +246,7 @@ def acquisition(model: PhotoModel, left_bgr: np.ndarray, right_bgr: np.ndarray, 
     camera frame (vision/tracker.py). `seeded_only`: no unseeded island over the whole volume
     (no candidate at all when nothing seeds)."""
     ss = np.random.SeedSequence(seed)
+    frame = search_frame(frame, model, left_bgr, right_bgr, p)
     islands = _islands(model, rig, frame, ga_params, p, fit_params, ss, seeded_only)
     if not islands:
         return Acquired([], [])

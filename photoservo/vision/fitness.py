@@ -31,6 +31,11 @@ and it cannot raise the score by shrinking the denominator). The two cameras com
     min:      F = min(F_L, F_R)                      (demand both cameras)
     product:  F = max(F_L, 0) · max(F_R, 0)          (demand both; 1.0 still means perfect)
 
+Where the target's hues cover most of the pair (the estimator's `hues_everywhere`), outer points on
+a target hue say nothing of where the target ends; the frame then carries the pair's chroma and
+the counts follow the contour rule of `vision/contour.py` (an outer point on a target hue is
+judged by the colour edge between it and its nearest inner point).
+
 Two implementations share one API: `fitness_reference` (vectorised numpy, built on
 `rig.project_points`, the specification) and the compiled numba kernel of `fitness_kernel`
 used by `fitness` when `[fitness] kernel = "numba"` (one thread, default) or
@@ -45,7 +50,7 @@ Speed (benchmarks/fitness_speed.py): one generation of 30 individuals x 1000 poi
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Literal
+from typing import TYPE_CHECKING, Literal
 
 import numpy as np
 
@@ -58,6 +63,9 @@ from photoservo.vision.photo_model import (
     hue_image,
 )
 from photoservo.vision.rig import Rig, project_points
+
+if TYPE_CHECKING:
+    from photoservo.vision.contour import StereoChroma
 
 # Columns of the per-camera count array (P, 2, N_COUNTS).
 IN_MATCH, IN_MISMATCH, OUT_MATCH, OUT_MISMATCH, OUTSIDE = range(5)
@@ -77,6 +85,7 @@ class FitnessParams:
     w_outer_mismatch: float  # cost per outer point on a target hue
     w_outside: float  # cost per point projected outside the image or behind the camera
     combine: Literal["mean", "min", "product"]  # how left and right scores combine
+    contour_chroma: float  # a*b* distance that makes a colour edge for the contour rule (vision/contour.py)
     kernel: Literal["numba", "numba-parallel", "numpy"]  # compiled (1 thread / threads) or reference
 
     def validate(self, where: str) -> None:
@@ -89,7 +98,8 @@ class FitnessParams:
             v = getattr(self, n)
             if not 0 <= v <= 255:
                 raise InputError(f"config key '{key(n)}': must be 0..255, got {v}")
-        for n in ("w_inner_match", "w_inner_mismatch", "w_outer_match", "w_outer_mismatch", "w_outside"):
+        for n in ("w_inner_match", "w_inner_mismatch", "w_outer_match", "w_outer_mismatch", "w_outside",
+                  "contour_chroma"):
             v = getattr(self, n)
             if not (np.isfinite(v) and v >= 0):
                 raise InputError(f"config key '{key(n)}': must be a finite number >= 0, got {v}")
@@ -102,10 +112,12 @@ class FitnessParams:
 @dataclass(frozen=True)
 class StereoHue:
     """One stereo frame as hue images (OpenCV hue 0..179, NO_HUE = 255 where a pixel is too grey
-    or too dark to carry hue). `left`, `right`: (H, W) uint8, C-contiguous."""
+    or too dark to carry hue). `left`, `right`: (H, W) uint8, C-contiguous. `chroma`: the pair's
+    a*b* planes where the contour rule applies (`vision/contour.py`), else None."""
 
     left: np.ndarray
     right: np.ndarray
+    chroma: StereoChroma | None = None
 
 
 def stereo_hue(left_bgr: np.ndarray, right_bgr: np.ndarray, params: FitnessParams) -> StereoHue:
@@ -237,6 +249,10 @@ def fitness_reference(R: np.ndarray, t: np.ndarray, alpha: np.ndarray, model: Ph
                       frame: StereoHue, rig: Rig, params: FitnessParams) -> np.ndarray:
     """Stereo fitness (P,) of a population, numpy reference of method step 3 (module docstring)."""
     counts = counts_reference(R, t, alpha, model, frame, rig, params)
+    if frame.chroma is not None:
+        from photoservo.vision.contour import contour_counts_reference, with_contour
+
+        counts = with_contour(counts, contour_counts_reference(R, t, alpha, model, frame, rig, params), params)
     return _combine(counts, len(model.inner_uv), len(model.outer_uv), params)
 
 
@@ -254,6 +270,13 @@ def fitness(R: np.ndarray, t: np.ndarray, alpha: np.ndarray, model: PhotoModel, 
     from photoservo.vision import fitness_kernel as fk
 
     counts = counts_compiled(R, t, alpha, model, frame, rig, params)
+    if frame.chroma is not None:
+        from photoservo.vision.contour import contour_counts, with_contour
+
+        R, t, alpha = _poses(R, t, alpha)
+        counts = with_contour(counts, contour_counts(R, t, alpha, model, frame, rig, params), params)
+    # float64 counts either way: one compiled signature of `combine` (the contour rule's are fractional)
+    counts = np.asarray(counts, dtype=np.float64)
     w = np.array([params.w_inner_match, params.w_inner_mismatch, params.w_outer_match,
                   params.w_outer_mismatch, params.w_outside])
     mode = ("mean", "min", "product").index(params.combine)

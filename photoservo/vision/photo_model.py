@@ -12,6 +12,7 @@ Hue is OpenCV's 8-bit hue, 0..179 (2 degrees per step), circular.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from functools import cached_property
 
 import cv2
 import numpy as np
@@ -62,6 +63,24 @@ class PhotoModel:
     mask: np.ndarray
     inner_value: np.ndarray = field(default_factory=lambda: np.zeros(0, np.float32))
     inner_brightness: np.ndarray = field(default_factory=lambda: np.zeros(0, np.float32))
+
+    @cached_property
+    def outer_neighbour(self) -> np.ndarray:
+        """(N_out,) int32: each outer point's nearest inner point (the contour rule's pairs,
+        `vision/contour.py`); computed once per model."""
+        from photoservo.vision.contour import outer_neighbours
+
+        return outer_neighbours(self.inner_uv, self.outer_uv)
+
+    @cached_property
+    def contour_points(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The contour rule's kernel inputs, computed once per model: (the inner points that are
+        some outer point's neighbour (K, 2) float64, each outer point's neighbour among them
+        (N_out,) int32, the outer points (N_out, 2) float64), all C-contiguous."""
+        used, neighbour = np.unique(self.outer_neighbour, return_inverse=True)
+        inner = np.asarray(self.inner_uv, np.float64).reshape(-1, 2)[used]
+        return (np.ascontiguousarray(inner), np.ascontiguousarray(neighbour.reshape(-1), np.int32),
+                np.ascontiguousarray(self.outer_uv, np.float64).reshape(-1, 2))
 
     def size_mm(self, alpha: float) -> tuple[float, float]:
         """Real size (width along model x, height along model y) in mm at ratio alpha (px/mm)."""
