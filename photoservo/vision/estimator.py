@@ -275,7 +275,8 @@ def acquisition(model: PhotoModel, left_bgr: np.ndarray, right_bgr: np.ndarray, 
     results = ranked(results, p.passed_standing_ratio)
     if p.twin_appearance and results:
         search = dict(islands)[results[0][1].source]
-        results[0] = yield from appearance_twin(results[0], search, looks["grey_frame"], p, seed, looks["value_frame"])
+        results[0] = yield from appearance_twin(results[0], search, looks["grey_frame"], p, seed, looks["value_frame"],
+                                                looks["parts"])
     return Acquired(results, islands)
 
 
@@ -289,8 +290,8 @@ TURNED_WINDOWS = ((0.03, 0.08), (0.06, 0.15), (0.06, 0.15))
 
 
 def appearance_twin(first: tuple[Detection, Candidate], search: PoseSearch, grey_frame: StereoGrey,
-                    p: EstimatorParams, seed: int = 0, value_frame: StereoGrey | None = None
-                    ) -> Generator[int, None, tuple[Detection, Candidate]]:
+                    p: EstimatorParams, seed: int = 0, value_frame: StereoGrey | None = None,
+                    parts: np.ndarray | None = None) -> Generator[int, None, tuple[Detection, Candidate]]:
     """The chosen candidate or its head-to-tail twin at the same place (`PoseSearch.turned_steps`:
     turned about the photo mask's centroid, refined by a short GA in each of TURNED_WINDOWS in
     turn), decided by the appearance cue (`vision/appearance.py`): the hue fitness scores a
@@ -300,7 +301,8 @@ def appearance_twin(first: tuple[Detection, Candidate], search: PoseSearch, grey
     it passes detection whenever the candidate does (it is then re-fitted per axis as the leading
     island is). A candidate whose own score leaves no room for that (>= min + margin) is kept
     without a search. `value_frame` (`appearance.stereo_value`): the twin's detection may excuse an
-    outline spill as the candidate's may (vision/detection.py). One generation per step; returns
+    outline spill as the candidate's may (vision/detection.py); `parts`: the model's
+    `parts.model_parts`, as the candidate's detection had them. One generation per step; returns
     (detection, candidate)."""
     d, c = first
     model, frame, rig = search.model, search.frame, search.rig
@@ -308,7 +310,7 @@ def appearance_twin(first: tuple[Detection, Candidate], search: PoseSearch, grey
     def score(x: Candidate) -> float:
         return appearance(x.R_model, x.position_mm, x.alpha, model, frame, grey_frame, rig)
 
-    a_c = score(c)
+    a_c = d.appearance if np.isfinite(d.appearance) else score(c)  # detect measured it with these frames
     if not np.isfinite(a_c) or a_c >= p.twin_min_appearance + p.twin_appearance_margin:
         return first
     for position_frac, alpha_frac in TURNED_WINDOWS:
@@ -325,7 +327,7 @@ def appearance_twin(first: tuple[Detection, Candidate], search: PoseSearch, grey
             twin = k
         yield search.ga.generation - g0
     d_t = detect(twin, model, frame, rig, search.fit_params, p, seed=seed, grey_frame=grey_frame,
-                 value_frame=value_frame)
+                 value_frame=value_frame, parts=parts)
     if d.passed and not d_t.passed:
         return first
     return d_t, twin
