@@ -147,9 +147,12 @@ def _move_under_way(emu) -> tuple[np.ndarray, subprocess.Popen]:
     p = subprocess.Popen([PY, "-m", "photoservo.cli", "move", "--port", emu.path, "--joints",
                           *map(str, target), "--speed", "50", "--no-record"],
                          stderr=subprocess.PIPE, text=True)
-    if not _wait(lambda: emu.true_state().status & P.Status.MOVING, 15.0):
+    # the process's start (imports, link handshake) is slow on a busy machine: wait for the move
+    # itself or for the process to end, whichever comes first
+    if not _wait(lambda: emu.true_state().status & P.Status.MOVING or p.poll() is not None, 60.0) \
+            or p.poll() is not None:
         p.kill()
-        raise AssertionError("never started moving")
+        raise AssertionError(f"never started moving: {p.communicate()[1]!r}")
     time.sleep(0.3)
     return target, p
 

@@ -67,7 +67,8 @@ class BridgeModel:
     Setpoint checks, in order: servo on and not stopping, finite, newer seq, inside
     [q_min, q_max], |dq_sp| <= dq_max, and |q_sp - q_ref| <= dq_max·T·k·(1 + jump_tolerance),
     q_ref the last accepted setpoint (the measured q for the first one), k = the periods since
-    it, between 1 and watchdog_periods (so one lost frame does not cascade into refusals).
+    it on the bridge's clock or by the host's stamps, whichever is more, between 1 and
+    watchdog_periods (so one lost or late frame does not cascade into refusals).
     """
 
     def __init__(self, limits: PA10Limits, params: EmulatorParams, q0: np.ndarray | None = None,
@@ -92,7 +93,7 @@ class BridgeModel:
         self.dq_sp = np.zeros_like(self.q)
         self.q_ref: np.ndarray | None = None  # last accepted setpoint (jump reference)
         self.t_last_setpoint = now  # last accepted setpoint, or servo enable
-        self.t_host_echo_us = 0
+        self.t_host_echo_us = 0  # the host's stamp of the last accepted setpoint (us)
         self.last_seq = 0
         self.setpoint_seq: int | None = None
         self.accepted = 0
@@ -185,7 +186,11 @@ class BridgeModel:
             j = int(np.argmax(fast))
             return P.Error.SPEED, j, float(dq[j])
         q_ref = self.q if self.q_ref is None else self.q_ref
-        k = 1.0 if self.q_ref is None else min(max(1.0, (now - self.t_last_setpoint) / self.T),
+        # periods since q_ref, by this bridge's clock or by the host's stamps, whichever is more:
+        # a setpoint the host dropped (line busy) or a bridge that read two at once (its thread
+        # late) must not turn the next good one into a refusal; never more than the watchdog's
+        k_host = (m.t_host_us - self.t_host_echo_us) * 1e-6 / self.T
+        k = 1.0 if self.q_ref is None else min(max(1.0, (now - self.t_last_setpoint) / self.T, k_host),
                                                float(self.params.watchdog_periods))
         jump = np.abs(q - q_ref) > self.dq_max * self.T * k * tol + 1e-6
         if jump.any():
