@@ -33,10 +33,10 @@ target hue and the body's brightness correlation, each at least `min_appearance`
 Pearson correlations, invariant to the image's gain and offset.
 
 A candidate must also have its parts there (`vision/parts.py`): the photo-model's inner points
-fall into compact parts, and at most `max_absent_parts` of the parts that land on hue may have
-fewer than half their points on a target hue — a crab's model squeezed onto a squid or a buoy of
-its colour matches on its body while its legs lie on water; foam over a creature leaves its
-parts without hue, which does not count against it.
+fall into compact parts, and at most `max_absent_parts` of the model's parts may land on hue
+with fewer than half their points on a target hue — a crab's model squeezed onto a squid or a
+buoy of its colour matches on its body while its legs lie on water; foam over a creature leaves
+its parts without hue, which does not count against it.
 """
 
 from __future__ import annotations
@@ -217,7 +217,8 @@ class Detection:
     candidate compares with the best a search of this pair at its apparent scale finds
     elsewhere; candidates are ranked by it. `appearance`, `body_layout`: `appearance_pair` (nan
     when not measured). `absent_parts`: the share of the model's parts absent in the worse camera
-    (`vision/parts.py`; nan when no part lands on hue)."""
+    (`vision/parts.py`: of all its parts, those under foam are not absent; nan when no part lands
+    on hue)."""
 
     score: float
     null_level: float
