@@ -301,3 +301,18 @@ def test_fk_frames_of_a_batch_are_those_of_each_configuration():
         for i in range(7):
             T = T @ rot("z", q[i]) @ trans("z", DH_D_MM[i]) @ trans("x", DH_A_MM[i]) @ rot("x", DH_ALPHA[i])
             np.testing.assert_allclose(Fq[i + 1], T, atol=1e-9)
+
+
+def test_fk_frames_compiles_one_kernel_for_every_input():
+    """Read-only joints (a module constant, a decoded state report) and writable ones, single and
+    batched, reach the kernel as one type: the warm start's compile covers the control loop's
+    calls (a second compile there stalled the first run's loop: a watchdog stop at ~3 s)."""
+    from photoservo.robot.pa10_kernel import fk_frames_kernel
+
+    q = np.asarray(pa10.HOME_Q, float)
+    ro = np.frombuffer(q.tobytes())
+    assert not ro.flags.writeable
+    for arg in (ro, q.copy(), np.stack([q, q]), np.asfortranarray(np.stack([q, q]))[:, ::1]):
+        pa10.fk_frames(arg)
+    assert len(fk_frames_kernel.signatures) == 1, fk_frames_kernel.signatures
+    np.testing.assert_array_equal(pa10.fk_frames(ro), pa10.fk_frames(q.copy()))

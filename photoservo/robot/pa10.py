@@ -191,7 +191,9 @@ def fk_frames(q) -> np.ndarray:
     q = np.asarray(q, dtype=float)
     if q.shape[-1:] != (N_JOINTS,) or q.ndim > 2:
         raise ValueError(f"expected {N_JOINTS} joint angles (or N x {N_JOINTS}), got shape {q.shape}")
-    Q = np.ascontiguousarray(q.reshape(-1, N_JOINTS))
+    # always a fresh, writable C array: a read-only one (a constant, a decoded buffer) is another
+    # type to numba, and compiling it a second time inside the control loop stalls the loop
+    Q = np.array(q.reshape(-1, N_JOINTS), order="C")
     frames = np.empty((len(Q), N_JOINTS + 1, 4, 4))
     fk_frames_kernel(Q, DH_A_MM, DH_D_MM, _CA, _SA, frames)
     return frames.reshape(q.shape[:-1] + (N_JOINTS + 1, 4, 4))
