@@ -38,7 +38,7 @@ import numpy as np
 
 from photoservo.config import load_config
 from photoservo.fileio import write_text_atomic
-from photoservo.sim.middlebury import real_cases
+from photoservo.sim.middlebury import TARGETS as TARGET_NAMES, VARIANTS, real_cases
 from photoservo.vision.estimator import estimate, search_frame
 from photoservo.vision.pose_search import GeneSpace, PoseSearch
 from photoservo.vision.fitness import fitness, stereo_hue
@@ -153,13 +153,16 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--size-mm", metavar="LO,HI", help="size prior: the target's longest side is LO..HI mm "
                     "(sets alpha_min/alpha_max per photo); default: the default alpha range")
     ap.add_argument("--seeds", type=int, default=1, help="estimator seeds per case (default 1)")
+    ap.add_argument("--targets", default=",".join(TARGET_NAMES), help="targets to run (default: all)")
+    ap.add_argument("--variants", default=",".join(VARIANTS), help="photo variants to run (default: all)")
     ap.add_argument("--out", default=str(Path(__file__).parent / "out" / "real_pair.json"))
     a = ap.parse_args(argv)
     cfg = load_config(None, ["estimator.z_min_mm=500", "estimator.z_max_mm=5000", *a.overrides])
     load = os.getloadavg()
     print(f"real stereo pair (Middlebury 2014 Motorcycle, scikit-image), scale {a.scale}; load average {load[0]:.1f} "
           f"on {os.cpu_count()} cores", flush=True)
-    cases = real_cases(cfg.photo_model, scale=a.scale)
+    cases = real_cases(cfg.photo_model, scale=a.scale, targets=tuple(a.targets.split(",")),
+                       variants=tuple(a.variants.split(",")))
     size_mm = tuple(float(v) for v in a.size_mm.split(",")) if a.size_mm else None
     rows = []
     for case in cases:

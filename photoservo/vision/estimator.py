@@ -70,6 +70,7 @@ class EstimatorParams:
     window_grow: float  # seeded window: ln s reaches this far above the blob's (the blob may be a piece)
     layout_share: float  # seed from the hue layout when seeding.target_mask holds more than this share of hued px
     contour_rule: bool  # where the target's hues are everywhere, the fitness judges outer points by colour edges
+    contour_grow: float  # ...and the leading island's fit is refined, then tried grown by sqrt(this) and this (1 = off)
     group_reach: float  # blob pairs group when their gap is <= this x the sum of their half-lengths
     plane_refine: bool  # correct the tilt by a stereo plane fit over the inner points (vision/stereo_plane.py)
     plane_fitness_tol: float  # ...accepted when the re-fitted pose's fitness is at most this below the GA's
@@ -109,6 +110,7 @@ class EstimatorParams:
             ("window_grow", self.window_grow >= 0, "must be >= 0"),
             ("aspect_max", self.aspect_max >= 1.0, "must be >= 1"),
             ("layout_share", 0.0 <= self.layout_share <= 1.0, "must be in [0, 1]"),
+            ("contour_grow", self.contour_grow >= 1.0, "must be >= 1"),
             ("group_reach", self.group_reach >= 0, "must be >= 0"),
             ("passed_standing_ratio", 0.0 <= self.passed_standing_ratio <= 1.0, "must be in [0, 1]"),
             ("twin_min_appearance", -1.0 <= self.twin_min_appearance <= 1.0, "must be in [-1, 1]"),
@@ -253,9 +255,12 @@ def acquisition(model: PhotoModel, left_bgr: np.ndarray, right_bgr: np.ndarray, 
     firsts = []
     for _, search in islands:
         firsts.append((yield from search.steps()))
-    # the look-alike twins (mirror, heading + 180 deg) are tried for the leading island only
+    # the look-alike twins (mirror, heading + 180 deg), and where the contour rule scores the grown fits,
+    # are tried for the leading island only
     lead = int(np.argmax([c.fitness for c in firsts]))
     search = islands[lead][1]
+    if frame.chroma is not None and p.contour_grow > 1.0:  # the contour rule's narrow peak (PoseSearch.grown_steps)
+        firsts[lead] = yield from search.grown_steps(firsts[lead], (1.0, math.sqrt(p.contour_grow), p.contour_grow))
     firsts[lead] = yield from search.twin_steps(firsts[lead])
     if p.plane_refine and np.isfinite(firsts[lead].fitness):
         firsts[lead] = yield from search.tilt_steps(firsts[lead], left_bgr, right_bgr)
