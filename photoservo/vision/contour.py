@@ -42,15 +42,17 @@ import numpy as np
 from numba import njit
 
 from photoservo.vision.fitness_kernel import _FAST, _pixel_indices, _plane_map, _split_points, camera_vector
-from photoservo.vision.photo_model import HUE_BINS, PhotoModel
+from photoservo.vision.photo_model import HUE_BINS, NO_HUE, PhotoModel
 from photoservo.vision.rig import Rig
 
 if TYPE_CHECKING:
     from photoservo.vision.fitness import FitnessParams, StereoHue
 
 # columns of `contour_counts`: outer points on a target hue across an edge, on a target hue
-# without one, without hue across an edge
-TARGET_EDGE, TARGET_FLAT, NO_HUE_EDGE = range(3)
+# without one, without hue across an edge; and of the kernel's sums besides, for the distinctive
+# outline (`outline_spill`): the flat ones whose inner neighbour is on a target hue too (the target
+# goes on), and the distinctive weight summed over the other target-hue points not across an edge
+TARGET_EDGE, TARGET_FLAT, NO_HUE_EDGE, GOES_ON, RIM_WEIGHT = range(5)
 # an outer point and its inner neighbour projected less than this many pixels apart (along rows or
 # columns) are not judged: a real edge is blurred over a pixel or two (optics, demosaicing, any
 # resampling) and shows only in part between closer pixels, and a fit shrunk to a few pixels read
@@ -87,14 +89,15 @@ def outer_neighbours(inner_uv: np.ndarray, outer_uv: np.ndarray) -> np.ndarray:
 
 @njit(cache=True, error_model="numpy", fastmath=_FAST, nogil=True)
 def _contour_kernel(R, t, alpha, rig_R, rig_T, cam_l, cam_r, inner_uv, outer_uv, neighbour, target_hues,
-                    hue_l, hue_r, ab_l, ab_r, limit2):  # pragma: no cover - compiled
-    """(P, 2, 3) counts TARGET_EDGE, TARGET_FLAT, NO_HUE_EDGE per individual and camera (module
-    docstring); limit2 = contour_chroma squared. Points are projected as in fitness_kernel; a
-    pair of points less than MIN_GAP_PX apart is not judged."""
+                    hue_l, hue_r, ab_l, ab_r, limit2, weight):  # pragma: no cover - compiled
+    """(P, 2, 5) sums TARGET_EDGE, TARGET_FLAT, NO_HUE_EDGE, GOES_ON, RIM_WEIGHT per individual
+    and camera (module docstring; `contour_cases` reads the same per point); limit2 =
+    contour_chroma squared, weight (256,) the distinctive weight of each hue value. Points are
+    projected as in fitness_kernel; a pair of points less than MIN_GAP_PX apart is not judged."""
     P = R.shape[0]
     u, v, n_in = _split_points(inner_uv, outer_uv)
     n = u.shape[0]
-    out = np.zeros((P, 2, 3), dtype=np.int64)
+    out = np.zeros((P, 2, 5), dtype=np.float64)
     a = np.empty((3, 3))
     idx = np.empty(n, np.int32)
     for job in range(2 * P):
@@ -109,50 +112,87 @@ def _contour_kernel(R, t, alpha, rig_R, rig_T, cam_l, cam_r, inner_uv, outer_uv,
         _pixel_indices(a, u, v, cam, idx)
         for k in range(n - n_in):
             io = idx[n_in + k]
-            ii = idx[neighbour[k]]
-            if io < 0 or ii < 0:
+            if io < 0:
                 continue
-            d = io - ii  # rows and columns apart: d = dr w + dc with |dc| < w / 2 for close points
-            dr = np.int32(np.floor(d * inv_w + 0.5))
-            dc = d - dr * w
-            if max(abs(dr), abs(dc)) < MIN_GAP_PX:  # too close for an edge to show
+            h = hue[io]
+            target = h < 180 and target_hues[h]
+            ii = idx[neighbour[k]]
+            judged = False
+            if ii >= 0:
+                d = io - ii  # rows and columns apart: d = dr w + dc with |dc| < w / 2 for close points
+                dr = np.int32(np.floor(d * inv_w + 0.5))
+                dc = d - dr * w
+                judged = max(abs(dr), abs(dc)) >= MIN_GAP_PX  # closer: too close for an edge to show
+            if not judged:
+                if target:
+                    out[p, c, 4] += weight[h]
                 continue
             da = np.int32(ab[2 * io]) - np.int32(ab[2 * ii])
             db = np.int32(ab[2 * io + 1]) - np.int32(ab[2 * ii + 1])
             edge = da * da + db * db > limit2
-            h = hue[io]
-            if h < 180:
-                if target_hues[h]:
-                    out[p, c, 0 if edge else 1] += 1
-            elif edge:
-                out[p, c, 2] += 1
+            if target:
+                if edge:
+                    out[p, c, 0] += 1.0
+                else:
+                    out[p, c, 1] += 1.0
+                    hi = hue[ii]
+                    if hi < 180 and target_hues[hi]:
+                        out[p, c, 3] += 1.0
+                    else:
+                        out[p, c, 4] += weight[h]
+            elif h >= 180 and edge:
+                out[p, c, 2] += 1.0
     return out
+
+
+def _contour_sums(R: np.ndarray, t: np.ndarray, alpha: np.ndarray, model: PhotoModel, frame: StereoHue,
+                  chroma: StereoChroma, rig: Rig, params: FitnessParams, weight: np.ndarray | None) -> np.ndarray:
+    """The compiled kernel's (P, 2, 5) sums (its docstring); `weight` None: zeros."""
+    c = lambda x, dt: np.ascontiguousarray(x, dtype=dt)  # noqa: E731
+    inner, neighbour, outer = model.contour_points  # only the inner points that are some outer point's neighbour
+    lut = np.zeros(256) if weight is None else c(weight, np.float64)
+    return _contour_kernel(c(R, np.float64), c(t, np.float64), c(alpha, np.float64), rig.R, rig.T,
+                           camera_vector(rig.left.K, rig.left.dist, rig.left.size),
+                           camera_vector(rig.right.K, rig.right.dist, rig.right.size),
+                           inner, outer, neighbour, c(model.target_hues, np.bool_),
+                           c(frame.left, np.uint8), c(frame.right, np.uint8), chroma.left, chroma.right,
+                           float(params.contour_chroma) ** 2, lut)
 
 
 def contour_counts(R: np.ndarray, t: np.ndarray, alpha: np.ndarray, model: PhotoModel, frame: StereoHue,
                    rig: Rig, params: FitnessParams) -> np.ndarray:
     """(P, 2, 3) counts of the contour rule (module docstring) of poses R (P,3,3), t (P,3) mm,
     alpha (P,) px/mm (model in the left camera frame); `frame.chroma` must be set."""
-    c = lambda x, dt: np.ascontiguousarray(x, dtype=dt)  # noqa: E731
-    inner, neighbour, outer = model.contour_points  # only the inner points that are some outer point's neighbour
-    return _contour_kernel(c(R, np.float64), c(t, np.float64), c(alpha, np.float64), rig.R, rig.T,
-                           camera_vector(rig.left.K, rig.left.dist, rig.left.size),
-                           camera_vector(rig.right.K, rig.right.dist, rig.right.size),
-                           inner, outer, neighbour, c(model.target_hues, np.bool_),
-                           c(frame.left, np.uint8), c(frame.right, np.uint8), frame.chroma.left, frame.chroma.right,
-                           float(params.contour_chroma) ** 2)
+    return _contour_sums(R, t, alpha, model, frame, frame.chroma, rig, params, None)[..., :3].astype(np.int64)
 
 
-def contour_counts_reference(R: np.ndarray, t: np.ndarray, alpha: np.ndarray, model: PhotoModel,
-                             frame: StereoHue, rig: Rig, params: FitnessParams) -> np.ndarray:
-    """`contour_counts` in numpy (the specification, on `fitness.project_model`)."""
-    from photoservo.vision.fitness import project_model
+def outline_spill(R: np.ndarray, t: np.ndarray, alpha: np.ndarray, model: PhotoModel, frame: StereoHue,
+                  chroma: StereoChroma, rig: Rig, params: FitnessParams, weight: np.ndarray) -> np.ndarray:
+    """(P, 2) the distinctive outline's spill (vision/detection.py) per pose and camera: the outer
+    points on a target hue whose inner neighbour is on a target hue too, with no colour edge between
+    (judged), count 1; those across an edge 0; the others their hue's `weight` ((256,) lookup,
+    `silhouette.distinctive_weight`). Poses as in `contour_counts`; `chroma` the pair's planes."""
+    s = _contour_sums(R, t, alpha, model, frame, chroma, rig, params, weight)
+    return s[..., GOES_ON] + s[..., RIM_WEIGHT]
 
-    p = project_model(R, t, alpha, model, rig)
-    nb = model.outer_neighbour
-    out = []
-    for hue, ab, inner, outer in ((frame.left, frame.chroma.left, p.inner_left, p.outer_left),
-                                  (frame.right, frame.chroma.right, p.inner_right, p.outer_right)):
+
+def contour_cases(R: np.ndarray, t: np.ndarray, alpha: np.ndarray, model: PhotoModel, frame: StereoHue,
+                  chroma: StereoChroma, rig: Rig, params: FitnessParams
+                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The contour rule's reading of every outer point (module docstring) at poses R (P,3,3), t
+    (P,3) mm, alpha (P,) px/mm, in numpy on `fitness.project_uv`: (P, 2, N_out) arrays, axis 1
+    the left and right camera — the image hue under the outer point and under its inner
+    neighbour (NO_HUE where none or outside the image), whether the pair is judged (both inside,
+    at least MIN_GAP_PX apart) and whether a colour edge lies between them (a*b* distance above
+    contour_chroma)."""
+    from photoservo.vision.fitness import project_uv
+
+    inner_uv, nb, outer_uv = model.contour_points  # only the inner points that are some outer point's neighbour
+    inner_l, inner_r = project_uv(R, t, alpha, inner_uv, rig)
+    outer_l, outer_r = project_uv(R, t, alpha, outer_uv, rig)
+    cams = []
+    for hue, ab, inner, outer in ((frame.left, chroma.left, inner_l, outer_l),
+                                  (frame.right, chroma.right, inner_r, outer_r)):
         def at(uv: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
             H, W = hue.shape
             with np.errstate(invalid="ignore"):
@@ -164,14 +204,36 @@ def contour_counts_reference(R: np.ndarray, t: np.ndarray, alpha: np.ndarray, mo
         W = hue.shape[1]
         dr = np.floor((io - ii) / W + 0.5).astype(np.intp)  # as the kernel: rows apart, then columns
         gap = np.maximum(np.abs(dr), np.abs(io - ii - dr * W)) >= MIN_GAP_PX
-        ok = ok_o & ok_i & gap
         d = ab.reshape(-1, 2)[io].astype(np.int32) - ab.reshape(-1, 2)[ii].astype(np.int32)
         edge = (d ** 2).sum(-1) > float(params.contour_chroma) ** 2
-        h = hue.ravel()[io]
-        target = (h < HUE_BINS) & np.asarray(model.target_hues, bool)[np.minimum(h, HUE_BINS - 1)]
-        out.append(np.stack([(ok & target & edge).sum(1), (ok & target & ~edge).sum(1),
-                             (ok & (h >= HUE_BINS) & edge).sum(1)], axis=-1))
-    return np.stack(out, axis=1).astype(np.int64)
+        h = hue.ravel()
+        cams.append((np.where(ok_o, h[io], NO_HUE), np.where(ok_i, h[ii], NO_HUE), ok_o & ok_i & gap, edge))
+    return tuple(np.stack(x, axis=1) for x in zip(*cams))  # type: ignore[return-value]
+
+
+def contour_counts_reference(R: np.ndarray, t: np.ndarray, alpha: np.ndarray, model: PhotoModel,
+                             frame: StereoHue, rig: Rig, params: FitnessParams) -> np.ndarray:
+    """`contour_counts` in numpy (the specification, on `contour_cases`)."""
+    h, _, ok, edge = contour_cases(R, t, alpha, model, frame, frame.chroma, rig, params)
+    target = (h < HUE_BINS) & np.asarray(model.target_hues, bool)[np.minimum(h, HUE_BINS - 1)]
+    return np.stack([(ok & target & edge).sum(-1), (ok & target & ~edge).sum(-1),
+                     (ok & (h >= HUE_BINS) & edge).sum(-1)], axis=-1).astype(np.int64)
+
+
+def outline_spill_reference(R: np.ndarray, t: np.ndarray, alpha: np.ndarray, model: PhotoModel,
+                            frame: StereoHue, chroma: StereoChroma, rig: Rig, params: FitnessParams,
+                            weight: np.ndarray) -> np.ndarray:
+    """`outline_spill` in numpy (the specification, on `contour_cases`)."""
+    h, h_in, judged, edge = contour_cases(R, t, alpha, model, frame, chroma, rig, params)
+    target_hues = np.asarray(model.target_hues, bool)
+
+    def on_target(x: np.ndarray) -> np.ndarray:
+        return (x < HUE_BINS) & target_hues[np.minimum(x, HUE_BINS - 1)]
+
+    target = on_target(h)
+    goes_on = target & judged & ~edge & on_target(h_in)
+    rim = target & ~(judged & edge) & ~goes_on
+    return goes_on.sum(axis=-1) + (np.asarray(weight, np.float64)[h] * rim).sum(axis=-1)
 
 
 def with_contour(counts: np.ndarray, contour: np.ndarray, params: FitnessParams) -> np.ndarray:

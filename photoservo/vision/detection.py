@@ -32,6 +32,26 @@ passes when the brightness layout inside it is the photo's by both appearance cu
 target hue and the body's brightness correlation, each at least `min_appearance`. Both are
 Pearson correlations, invariant to the image's gain and offset.
 
+Which outer points spill (`contour.outline_spill`, `[estimator] outline_distinctive`): blur and
+chroma loss blend a creature into the water over a pixel or two, so its rim takes hues between
+the two — within the hue tolerance of the target's hues, but hues the creature itself barely
+holds — and another individual's outline differs from the photo's by such a rim's width. A
+look-alike under the model instead goes on past the model's outline: the same stuff, the same
+colour, on both sides. Each outer point on a target hue is judged against its nearest inner
+point as the contour rule pairs them (`vision/contour.py`; the pair's chroma: the image compared
+with itself, not with the photo):
+
+    target hue on both, no colour edge between (pair judged):  1   (the target goes on)
+    across a colour edge:                                      0   (off the target)
+    otherwise (too close to judge, or the inner point off):    w(h) = M(h) / (M(h) + I(h))
+
+w the distinctive weight of its hue (`silhouette.distinctive_weight`: M, I the hue shares of the
+photo-model's inner points and of the pair's hued pixels): a rim hue the creature barely holds
+weighs ~0, the creature's own ~1. Where the contour rule is on (`frame.chroma`), it alone counts
+(only the flat points spill). Held-out harbour null 1557 (a fish's model on an orange squid) is
+what the weight alone let through: the squid's orange, a hue the fish's photo barely holds, goes
+on past the fish's outline (0.106 weighted, 0.149 here, against 0.11).
+
 A candidate must also have its parts there (`vision/parts.py`): the photo-model's inner points
 fall into compact parts, and at most `max_absent_parts` of the model's parts may land on hue
 with fewer than half their points on a target hue — a crab's model squeezed onto a squid or a
@@ -50,7 +70,14 @@ import numpy as np
 
 from photoservo.geometry import rotation_from_heading_tilt
 from photoservo.vision.appearance import StereoGrey, appearance, body_layout, body_points
-from photoservo.vision.contour import TARGET_FLAT, contour_counts, contour_counts_reference
+from photoservo.vision.contour import (
+    TARGET_FLAT,
+    StereoChroma,
+    contour_counts,
+    contour_counts_reference,
+    outline_spill,
+    outline_spill_reference,
+)
 from photoservo.vision.fitness import (
     OUT_MISMATCH,
     FitnessParams,
@@ -63,6 +90,7 @@ from photoservo.vision.parts import absent_parts
 from photoservo.vision.photo_model import PhotoModel
 from photoservo.vision.pose_search import Candidate, aspect_map
 from photoservo.vision.rig import Rig
+from photoservo.vision.silhouette import distinctive_weight
 
 if TYPE_CHECKING:
     from photoservo.vision.estimator import EstimatorParams
@@ -92,7 +120,8 @@ def confidence(contrast: float, params: EstimatorParams) -> float:
 
 def null_scores(c: Candidate, model: PhotoModel, frame: StereoHue, rig: Rig, fit_params: FitnessParams,
                 rng: np.random.Generator, placements: int = 40, jitters: int = 6,
-                depths_mm: tuple[float, float] | None = None, outer: bool = True) -> tuple[np.ndarray, np.ndarray]:
+                depths_mm: tuple[float, float] | None = None, outer: bool = True,
+                cues: OutlineCues | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Detection scores (fitness, cameras combined by min) of the candidate's model where the
     candidate is not: `placements` poses at the candidate's depth, tilt and alpha with the model
     origin at random pixels of the left image at least one apparent model length (at most 0.4 of
@@ -103,7 +132,7 @@ def null_scores(c: Candidate, model: PhotoModel, frame: StereoHue, rig: Rig, fit
     depth uniform between them) with alpha scaled to keep the candidate's apparent size — the
     model as a search of the pair at the candidate's apparent scale meets it anywhere in depth —
     and off the candidate in the right image too (at another depth the two differ).
-    `outer` False: the outer shares are not counted (an empty array)."""
+    `outer` False: the outer shares are not counted (an empty array); `cues`: `outer_share`'s."""
     strict = dataclasses.replace(fit_params, combine="min")
     K = rig.left.K
     t = np.asarray(c.position_mm, float)
@@ -131,7 +160,7 @@ def null_scores(c: Candidate, model: PhotoModel, frame: StereoHue, rig: Rig, fit
     pos = np.column_stack([(uv[:, 0] - K[0, 2]) * zs / K[0, 0], (uv[:, 1] - K[1, 2]) * zs / K[1, 1], zs])
     alpha = c.alpha * z / zs * rng.uniform(0.9, 1.1, n)
     f = fitness(R, pos, alpha, model, frame, rig, strict)
-    shares = outer_share(R, pos, alpha, model, frame, rig, fit_params) if outer else np.zeros(0)
+    shares = outer_share(R, pos, alpha, model, frame, rig, fit_params, cues) if outer else np.zeros(0)
     return f.reshape(-1, jitters).max(axis=1), shares
 
 
@@ -177,15 +206,30 @@ def placements(c: Candidate, model: PhotoModel, rig: Rig) -> float:
     return max(1.0, rig.left.width * rig.left.height / max(area, 1.0))
 
 
+@dataclass(frozen=True)
+class OutlineCues:
+    """What the distinctive outline (module docstring) reads besides the hue: `weight`, the (256,)
+    lookup `silhouette.distinctive_weight` of the pair, and `chroma`, the pair's a*b* planes
+    (`contour.stereo_chroma`)."""
+
+    weight: np.ndarray
+    chroma: StereoChroma
+
+
 def outer_share(R: np.ndarray, t: np.ndarray, alpha: np.ndarray, model: PhotoModel, frame: StereoHue, rig: Rig,
-                fit_params: FitnessParams) -> np.ndarray:
+                fit_params: FitnessParams, cues: OutlineCues | None = None) -> np.ndarray:
     """(P,): the largest share, over the two cameras, of outer points S_out on target hue — under
     the contour rule (`frame.chroma` set, vision/contour.py) of those on a target hue without a
-    colour edge to their inner neighbour, where the target goes on past the outline."""
+    colour edge to their inner neighbour, where the target goes on past the outline; with `cues`
+    elsewhere, the distinctive outline's spill (`contour.outline_spill`, module docstring)."""
     if frame.chroma is not None:
         R, t, alpha = np.reshape(R, (-1, 3, 3)), np.reshape(t, (-1, 3)), np.reshape(alpha, -1).astype(float)
         spill = (contour_counts_reference if fit_params.kernel == "numpy" else contour_counts)(
             R, t, alpha, model, frame, rig, fit_params)[:, :, TARGET_FLAT]
+    elif cues is not None:
+        R, t, alpha = np.reshape(R, (-1, 3, 3)), np.reshape(t, (-1, 3)), np.reshape(alpha, -1).astype(float)
+        spill = (outline_spill_reference if fit_params.kernel == "numpy" else outline_spill)(
+            R, t, alpha, model, frame, cues.chroma, rig, fit_params, cues.weight)
     else:
         spill = (counts_reference if fit_params.kernel == "numpy" else counts_compiled)(
             R, t, alpha, model, frame, rig, fit_params)[:, :, OUT_MISMATCH]
@@ -199,7 +243,8 @@ class Detection:
     pose that fits one image and not the other, cannot pass on the strength of one camera (the GA
     itself optimises the configured combination). `null_level`: the median of `null_scores`;
     `contrast` = (score - null_level) / (1 - null_level) (module docstring). `outer_on_target`:
-    the largest share, over the two cameras, of outer points S_out landing on target hue beyond
+    the largest share, over the two cameras, of outer points S_out landing on target hue (the
+    distinctive outline's spill where `detect` has the pair's chroma: module docstring) beyond
     what the pair's own background gives, (o - o_null) / (1 - o_null) with o_null the
     `OUTLINE_NULL_QUANTILE` quantile of the shares at the null placements (0 for a creature whose
     hues the water lacks; near 1 for a many-hued one whose hues include the water's; in between
@@ -246,21 +291,27 @@ def appearance_pair(c: Candidate, model: PhotoModel, frame: StereoHue, grey_fram
 
 def detect(c: Candidate, model: PhotoModel, frame: StereoHue, rig: Rig, fit_params: FitnessParams,
            p: EstimatorParams, seed: int = 0, grey_frame: StereoGrey | None = None,
-           value_frame: StereoGrey | None = None, parts: np.ndarray | None = None) -> Detection:
+           value_frame: StereoGrey | None = None, parts: np.ndarray | None = None,
+           chroma: StereoChroma | None = None) -> Detection:
     """The detection test of one candidate (see `Detection`); `seed` draws the null placements;
     `grey_frame` / `value_frame` (`appearance.stereo_grey` / `stereo_value` of the pair): the
     appearance cues that may excuse an outline spill (module docstring; without them, none);
-    `parts`: the model's `parts.model_parts` (computed when None)."""
+    `parts`: the model's `parts.model_parts` (computed when None); `chroma`
+    (`contour.stereo_chroma` of the pair): the distinctive outline (module docstring; without it,
+    every outer point on a target hue spills wholly)."""
     strict = dataclasses.replace(fit_params, combine="min")
     score = float(fitness(c.R_model, c.position_mm, c.alpha, model, frame, rig, strict)[0])
     rng = np.random.default_rng(seed)
-    null, null_outer = null_scores(c, model, frame, rig, fit_params, rng)
+    cues = None  # the distinctive outline (module docstring) where the contour rule does not bound the target
+    if p.outline_distinctive and chroma is not None and frame.chroma is None:
+        cues = OutlineCues(weight=distinctive_weight(frame.left, frame.right, model), chroma=chroma)
+    null, null_outer = null_scores(c, model, frame, rig, fit_params, rng, cues=cues)
     # the look-elsewhere null of `standing`: the model at its apparent size anywhere in the volume
     # (a small fit on a spot of the colour far off matches nothing at its own depth elsewhere)
     wide, _ = null_scores(c, model, frame, rig, fit_params, rng, placements=WIDE_PLACEMENTS,
                           depths_mm=(p.z_min_mm, p.z_max_mm), outer=False)
     o_null = min(float(np.quantile(null_outer, OUTLINE_NULL_QUANTILE)), 0.99) if len(null_outer) else 0.0
-    o = float(outer_share(c.R_model, c.position_mm, c.alpha, model, frame, rig, fit_params)[0])
+    o = float(outer_share(c.R_model, c.position_mm, c.alpha, model, frame, rig, fit_params, cues)[0])
     outer = max(0.0, (o - o_null) / (1.0 - o_null))
     q = float(np.median(null)) if len(null) else 0.0
     q = min(q, 0.99)

@@ -36,7 +36,7 @@ import numpy as np
 
 from photoservo.errors import InputError
 from photoservo.vision.appearance import StereoGrey, appearance, stereo_grey, stereo_value
-from photoservo.vision.contour import stereo_chroma
+from photoservo.vision.contour import StereoChroma, stereo_chroma
 from photoservo.vision.detection import Detection, detect
 from photoservo.vision.fitness import FitnessParams, StereoHue, stereo_hue
 from photoservo.vision.ga import GAParams
@@ -88,6 +88,8 @@ class EstimatorParams:
     max_outer_if_appearance: float  # ...or at most this share when both appearance cues reach min_appearance
     min_appearance: float  # appearance cues (vision/appearance.py) that excuse an outline spill
     max_absent_parts: float  # detection also needs at most this share of the model's parts absent (vision/parts.py)
+    outline_distinctive: bool  # an outer point on a target hue spills by how much more the creature holds of that
+    # hue than the pair does (silhouette.distinctive_weight), not wholly (vision/detection.py)
     passed_standing_ratio: float  # a candidate that passes ranks first when it stands >= this x the top, which fails
     twin_appearance: bool  # let the appearance cue choose between the first candidate and its head-to-tail twin
     twin_min_appearance: float  # ...the twin is taken when its appearance score is at least this,
@@ -272,7 +274,7 @@ def acquisition(model: PhotoModel, left_bgr: np.ndarray, right_bgr: np.ndarray, 
         yield search.ga.generation - g0
     results = []
     looks = dict(grey_frame=stereo_grey(left_bgr, right_bgr), value_frame=stereo_value(left_bgr, right_bgr),
-                 parts=model_parts(model.inner_uv))
+                 parts=model_parts(model.inner_uv), chroma=frame.chroma or stereo_chroma(left_bgr, right_bgr))
     for (name, search), c in zip(islands, firsts):
         if np.isfinite(c.fitness):
             results.append((detect(c, model, frame, rig, fit_params, p, seed=seed, **looks),
@@ -281,7 +283,7 @@ def acquisition(model: PhotoModel, left_bgr: np.ndarray, right_bgr: np.ndarray, 
     if p.twin_appearance and results:
         search = dict(islands)[results[0][1].source]
         results[0] = yield from appearance_twin(results[0], search, looks["grey_frame"], p, seed, looks["value_frame"],
-                                                looks["parts"])
+                                                looks["parts"], looks["chroma"])
     return Acquired(results, islands)
 
 
@@ -296,7 +298,8 @@ TURNED_WINDOWS = ((0.03, 0.08), (0.06, 0.15), (0.06, 0.15))
 
 def appearance_twin(first: tuple[Detection, Candidate], search: PoseSearch, grey_frame: StereoGrey,
                     p: EstimatorParams, seed: int = 0, value_frame: StereoGrey | None = None,
-                    parts: np.ndarray | None = None) -> Generator[int, None, tuple[Detection, Candidate]]:
+                    parts: np.ndarray | None = None, chroma: StereoChroma | None = None
+                    ) -> Generator[int, None, tuple[Detection, Candidate]]:
     """The chosen candidate or its head-to-tail twin at the same place (`PoseSearch.turned_steps`:
     turned about the photo mask's centroid, refined by a short GA in each of TURNED_WINDOWS in
     turn), decided by the appearance cue (`vision/appearance.py`): the hue fitness scores a
@@ -306,9 +309,9 @@ def appearance_twin(first: tuple[Detection, Candidate], search: PoseSearch, grey
     it passes detection whenever the candidate does (it is then re-fitted per axis as the leading
     island is). A candidate whose own score leaves no room for that (>= min + margin) is kept
     without a search. `value_frame` (`appearance.stereo_value`): the twin's detection may excuse an
-    outline spill as the candidate's may (vision/detection.py); `parts`: the model's
-    `parts.model_parts`, as the candidate's detection had them. One generation per step; returns
-    (detection, candidate)."""
+    outline spill as the candidate's may (vision/detection.py); `parts` (the model's
+    `parts.model_parts`) and `chroma` (the pair's a*b* planes): as the candidate's detection had
+    them. One generation per step; returns (detection, candidate)."""
     d, c = first
     model, frame, rig = search.model, search.frame, search.rig
 
@@ -332,7 +335,7 @@ def appearance_twin(first: tuple[Detection, Candidate], search: PoseSearch, grey
             twin = k
         yield search.ga.generation - g0
     d_t = detect(twin, model, frame, rig, search.fit_params, p, seed=seed, grey_frame=grey_frame,
-                 value_frame=value_frame, parts=parts)
+                 value_frame=value_frame, parts=parts, chroma=chroma)
     if d.passed and not d_t.passed:
         return first
     return d_t, twin

@@ -158,22 +158,27 @@ def _poses(R: np.ndarray, t: np.ndarray, alpha: np.ndarray) -> tuple[np.ndarray,
 
 def _model_points_left(R: np.ndarray, t: np.ndarray, alpha: np.ndarray, uv: np.ndarray) -> np.ndarray:
     """X_left = R · (u/alpha, v/alpha, 0) + t for every individual: (P, N, 3) mm."""
-    # R[:, :, :2] @ (uv / alpha)^T, arranged as (P, N, 3)
+    # (uv / alpha) @ R[:, :, :2]^T, (P, N, 3); a batched matmul (BLAS), not einsum (15x slower here)
     scaled = uv[None, :, :] / alpha[:, None, None]  # (P, N, 2)
-    return np.einsum("pij,pnj->pni", R[:, :, :2], scaled) + t[:, None, :]
+    return scaled @ R[:, :, :2].transpose(0, 2, 1) + t[:, None, :]
+
+
+def project_uv(R: np.ndarray, t: np.ndarray, alpha: np.ndarray, uv: np.ndarray,
+               rig: Rig) -> tuple[np.ndarray, np.ndarray]:
+    """Project photo-model points uv (N, 2) photo px at poses (R, t, alpha) into both cameras of
+    `rig` (method step 2): ((P, N, 2) left, (P, N, 2) right) px, NaN behind a camera. R
+    (P,3,3) or (3,3), t mm, alpha px/mm."""
+    R, t, alpha = _poses(R, t, alpha)
+    XL = _model_points_left(R, t, alpha, np.asarray(uv, dtype=np.float64).reshape(-1, 2))
+    XR = XL @ rig.R.T + rig.T
+    with np.errstate(over="ignore", invalid="ignore"):  # far off-axis points: inf/NaN = outside
+        return project_points(XL, rig.left), project_points(XR, rig.right)
 
 
 def project_model(R: np.ndarray, t: np.ndarray, alpha: np.ndarray, model: PhotoModel, rig: Rig) -> ModelProjection:
     """Project the inner and outer sampling points of `model` at poses (R, t, alpha) into both
     cameras of `rig` (method steps 2-3). R (P,3,3) or (3,3), t mm, alpha px/mm."""
-    R, t, alpha = _poses(R, t, alpha)
-    out = []
-    for uv in (model.inner_uv, model.outer_uv):
-        XL = _model_points_left(R, t, alpha, np.asarray(uv, dtype=np.float64).reshape(-1, 2))
-        XR = XL @ rig.R.T + rig.T
-        with np.errstate(over="ignore", invalid="ignore"):  # far off-axis points: inf/NaN = outside
-            out.append((project_points(XL, rig.left), project_points(XR, rig.right)))
-    (il, ir), (ol, orr) = out
+    (il, ir), (ol, orr) = (project_uv(R, t, alpha, uv, rig) for uv in (model.inner_uv, model.outer_uv))
     return ModelProjection(inner_left=il, outer_left=ol, inner_right=ir, outer_right=orr)
 
 
