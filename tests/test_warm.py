@@ -70,9 +70,20 @@ def test_warm_fitness_compiles_the_loops_own_signature():
     cfg = load_config()
     sim = build_sim(cfg)
     warm_start(sim.scene.model, sim.rig, cfg.fitness)
+    assert all(k.signatures for k in fitness_kernels(cfg.fitness))  # every one compiled or loaded now
     T = pa10.fk(sim.q0) @ sim.rig.T_flange_left()
     left, right = sim.scene.render(T, 0.0, T, 0.0)
     R = np.eye(3)[None].repeat(5, 0)
     t = np.tile([0.0, 0.0, 600.0], (5, 1))
-    fitness(R, t, np.full(5, 2.0), sim.scene.model, stereo_hue(left, right, cfg.fitness), sim.rig, cfg.fitness)
-    assert [len(k.signatures) for k in fitness_kernels(cfg.fitness)] == [1, 1, 1]
+    frame = stereo_hue(left, right, cfg.fitness)
+    fitness(R, t, np.full(5, 2.0), sim.scene.model, frame, sim.rig, cfg.fitness)
+    # the detection's outline, as an acquisition computes it (its contour kernel compiled inside the
+    # first acquisition made a first run's first track come 7 s into the session)
+    from photoservo.vision.contour import stereo_chroma
+    from photoservo.vision.detection import OutlineCues, outer_share
+    from photoservo.vision.silhouette import distinctive_weight
+
+    cues = OutlineCues(weight=distinctive_weight(frame.left, frame.right, sim.scene.model),
+                       chroma=stereo_chroma(left, right))
+    outer_share(R, t, np.full(5, 2.0), sim.scene.model, frame, sim.rig, cfg.fitness, cues)
+    assert [len(k.signatures) for k in fitness_kernels(cfg.fitness)] == [1, 1, 1, 1]

@@ -43,26 +43,38 @@ def kernels_cached(kernels: list) -> bool:
 
 
 def fitness_kernels(params: FitnessParams) -> list:
-    """The dispatchers a GA's fitness evaluation calls from Python with these params: the
-    counting kernel (serial or parallel) and `combine` (none for the numpy reference), and the
-    genes' decoding into poses (`genes_kernel.decode_genes`, always compiled)."""
+    """The dispatchers a GA's fitness evaluation and an acquisition's detection call from Python
+    with these params: the counting kernel (serial or parallel) and `combine`, the contour kernel
+    (the contour rule's counts and the detection's outline, `vision/contour.py`) - none of them
+    for the numpy reference - and the genes' decoding into poses (`genes_kernel.decode_genes`,
+    always compiled)."""
     from photoservo.vision.genes_kernel import decode_genes
 
     if params.kernel == "numpy":
         return [decode_genes]
+    from photoservo.vision import contour
     from photoservo.vision import fitness_kernel as fk
 
-    return [fk.counts_parallel if params.kernel == "numba-parallel" else fk.counts_serial, fk.combine, decode_genes]
+    return [fk.counts_parallel if params.kernel == "numba-parallel" else fk.counts_serial, fk.combine,
+            contour._contour_kernel, decode_genes]
 
 
 def warm_fitness(model: PhotoModel, rig: Rig, params: FitnessParams) -> float:
-    """Compile or load the fitness kernels (method step 3) with the loop's own argument types: one
-    fitness call on an empty (no-hue) frame of the rig's image size, the model 500 mm ahead of the
-    left camera at alpha 1 px/mm. Returns the seconds it took."""
+    """Compile or load the fitness kernels (method step 3) and the detection's contour kernel with
+    the loop's own argument types: one call of each on an empty (no-hue, no-chroma) frame of the
+    rig's image size, the model 500 mm ahead of the left camera at alpha 1 px/mm. Returns the
+    seconds it took."""
     t0 = time.perf_counter()
     frame = StereoHue(left=np.full((rig.left.height, rig.left.width), NO_HUE, np.uint8),
                       right=np.full((rig.right.height, rig.right.width), NO_HUE, np.uint8))
-    fitness(np.eye(3)[None], np.array([[0.0, 0.0, 500.0]]), np.array([1.0]), model, frame, rig, params)
+    R, t, alpha = np.eye(3)[None], np.array([[0.0, 0.0, 500.0]]), np.array([1.0])
+    fitness(R, t, alpha, model, frame, rig, params)
+    if params.kernel != "numpy":  # the detection's outline (and the contour rule): vision/contour.py
+        from photoservo.vision.contour import StereoChroma, outline_spill
+
+        ab = StereoChroma(left=np.zeros(frame.left.shape + (2,), np.uint8),
+                          right=np.zeros(frame.right.shape + (2,), np.uint8))
+        outline_spill(R, t, alpha, model, frame, ab, rig, params, np.zeros(256))
     _warm_decode(rig)
     return time.perf_counter() - t0
 
