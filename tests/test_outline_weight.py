@@ -90,6 +90,8 @@ def test_the_distinctive_outline_changes_the_outline_only(fish_on_water):
     d = detect(truth, model, frame, sc.rig, CFG.fitness, CFG.estimator, chroma=cues.chroma)
     assert (d.score, d.contrast, d.standing) == (d_whole.score, d_whole.contrast, d_whole.standing)
     assert d.outer_on_target < d_whole.outer_on_target
+    # the acquisition passes the pair's weight in, computed once for all its candidates: the same test
+    assert d == detect(truth, model, frame, sc.rig, CFG.fitness, CFG.estimator, chroma=cues.chroma, weight=cues.weight)
 
 
 def test_a_fish_whose_rim_spills_is_found(fish_on_water):

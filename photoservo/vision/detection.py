@@ -292,19 +292,21 @@ def appearance_pair(c: Candidate, model: PhotoModel, frame: StereoHue, grey_fram
 def detect(c: Candidate, model: PhotoModel, frame: StereoHue, rig: Rig, fit_params: FitnessParams,
            p: EstimatorParams, seed: int = 0, grey_frame: StereoGrey | None = None,
            value_frame: StereoGrey | None = None, parts: np.ndarray | None = None,
-           chroma: StereoChroma | None = None) -> Detection:
+           chroma: StereoChroma | None = None, weight: np.ndarray | None = None) -> Detection:
     """The detection test of one candidate (see `Detection`); `seed` draws the null placements;
     `grey_frame` / `value_frame` (`appearance.stereo_grey` / `stereo_value` of the pair): the
     appearance cues that may excuse an outline spill (module docstring; without them, none);
     `parts`: the model's `parts.model_parts` (computed when None); `chroma`
     (`contour.stereo_chroma` of the pair): the distinctive outline (module docstring; without it,
-    every outer point on a target hue spills wholly)."""
+    every outer point on a target hue spills wholly), with `weight` its hues' lookup
+    (`silhouette.distinctive_weight` of the pair; computed when None)."""
     strict = dataclasses.replace(fit_params, combine="min")
     score = float(fitness(c.R_model, c.position_mm, c.alpha, model, frame, rig, strict)[0])
     rng = np.random.default_rng(seed)
     cues = None  # the distinctive outline (module docstring) where the contour rule does not bound the target
     if p.outline_distinctive and chroma is not None and frame.chroma is None:
-        cues = OutlineCues(weight=distinctive_weight(frame.left, frame.right, model), chroma=chroma)
+        cues = OutlineCues(weight=distinctive_weight(frame.left, frame.right, model) if weight is None else weight,
+                           chroma=chroma)
     null, null_outer = null_scores(c, model, frame, rig, fit_params, rng, cues=cues)
     # the look-elsewhere null of `standing`: the model at its apparent size anywhere in the volume
     # (a small fit on a spot of the colour far off matches nothing at its own depth elsewhere)

@@ -46,7 +46,7 @@ from photoservo.vision.photo_model import HUE_BINS, PhotoModel
 from photoservo.vision.pose_search import Candidate, PoseSearch, drive
 from photoservo.vision.rig import Rig
 from photoservo.vision.seeding import ModelShape, blob_pairs, group_pairs, seed_genes, target_mask
-from photoservo.vision.silhouette import silhouette_pairs
+from photoservo.vision.silhouette import distinctive_weight, silhouette_pairs
 
 
 @dataclass(frozen=True)
@@ -273,8 +273,11 @@ def acquisition(model: PhotoModel, left_bgr: np.ndarray, right_bgr: np.ndarray, 
             firsts[lead] = c
         yield search.ga.generation - g0
     results = []
+    # what every candidate's detection reads of the pair, computed once per acquisition
     looks = dict(grey_frame=stereo_grey(left_bgr, right_bgr), value_frame=stereo_value(left_bgr, right_bgr),
-                 parts=model_parts(model.inner_uv), chroma=frame.chroma or stereo_chroma(left_bgr, right_bgr))
+                 parts=model_parts(model.inner_uv), chroma=frame.chroma or stereo_chroma(left_bgr, right_bgr),
+                 weight=(distinctive_weight(frame.left, frame.right, model)
+                         if p.outline_distinctive and frame.chroma is None else None))
     for (name, search), c in zip(islands, firsts):
         if np.isfinite(c.fitness):
             results.append((detect(c, model, frame, rig, fit_params, p, seed=seed, **looks),
@@ -283,7 +286,7 @@ def acquisition(model: PhotoModel, left_bgr: np.ndarray, right_bgr: np.ndarray, 
     if p.twin_appearance and results:
         search = dict(islands)[results[0][1].source]
         results[0] = yield from appearance_twin(results[0], search, looks["grey_frame"], p, seed, looks["value_frame"],
-                                                looks["parts"], looks["chroma"])
+                                                looks["parts"], looks["chroma"], looks["weight"])
     return Acquired(results, islands)
 
 
@@ -298,8 +301,8 @@ TURNED_WINDOWS = ((0.03, 0.08), (0.06, 0.15), (0.06, 0.15))
 
 def appearance_twin(first: tuple[Detection, Candidate], search: PoseSearch, grey_frame: StereoGrey,
                     p: EstimatorParams, seed: int = 0, value_frame: StereoGrey | None = None,
-                    parts: np.ndarray | None = None, chroma: StereoChroma | None = None
-                    ) -> Generator[int, None, tuple[Detection, Candidate]]:
+                    parts: np.ndarray | None = None, chroma: StereoChroma | None = None,
+                    weight: np.ndarray | None = None) -> Generator[int, None, tuple[Detection, Candidate]]:
     """The chosen candidate or its head-to-tail twin at the same place (`PoseSearch.turned_steps`:
     turned about the photo mask's centroid, refined by a short GA in each of TURNED_WINDOWS in
     turn), decided by the appearance cue (`vision/appearance.py`): the hue fitness scores a
@@ -310,8 +313,8 @@ def appearance_twin(first: tuple[Detection, Candidate], search: PoseSearch, grey
     island is). A candidate whose own score leaves no room for that (>= min + margin) is kept
     without a search. `value_frame` (`appearance.stereo_value`): the twin's detection may excuse an
     outline spill as the candidate's may (vision/detection.py); `parts` (the model's
-    `parts.model_parts`) and `chroma` (the pair's a*b* planes): as the candidate's detection had
-    them. One generation per step; returns (detection, candidate)."""
+    `parts.model_parts`), `chroma` (the pair's a*b* planes) and `weight` (their hues' distinctive
+    weight): as the candidate's detection had them. One generation per step; returns (detection, candidate)."""
     d, c = first
     model, frame, rig = search.model, search.frame, search.rig
 
@@ -335,7 +338,7 @@ def appearance_twin(first: tuple[Detection, Candidate], search: PoseSearch, grey
             twin = k
         yield search.ga.generation - g0
     d_t = detect(twin, model, frame, rig, search.fit_params, p, seed=seed, grey_frame=grey_frame,
-                 value_frame=value_frame, parts=parts, chroma=chroma)
+                 value_frame=value_frame, parts=parts, chroma=chroma, weight=weight)
     if d.passed and not d_t.passed:
         return first
     return d_t, twin
