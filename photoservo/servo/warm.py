@@ -23,7 +23,7 @@ from photoservo.vision.warm import fitness_kernels, kernels_cached, warm_fitness
 
 COMPILE_NOTICE = ("first run after installing: compiling the numba kernels (about {s:.0f} s of CPU, once; "
                   "later runs load them)")
-FIRST_COMPILE_CPU_S = 14  # measured: benchmarks/warm_start.py (fitness 8.7 s, renderer 3.9 s, kinematics 1.2 s of CPU)
+FIRST_COMPILE_CPU_S = 19  # measured: benchmarks/warm_start.py (fitness 11.9 s, renderer 5.2 s, kinematics 1.5 s of CPU)
 
 
 def warm_kinematics() -> float:
