@@ -72,7 +72,8 @@ def union(blobs: list[Blob]) -> Blob:
     return _shape(cc, A, mu20, mu02, mu11)
 
 
-def target_mask(hue: np.ndarray, target_hues: np.ndarray, dense_px: int = 7, stray_max: float = 0.0025) -> np.ndarray:
+def target_mask(hue: np.ndarray, target_hues: np.ndarray, dense_px: int = 7, stray_max: float = 0.0025,
+                above_water_sd: float = 0.0) -> np.ndarray:
     """The target-hue pixels of a hue image that seed from (uint8, 255). A region of target hue
     is where a pixel's `dense_px` square neighbourhood is at least half target hue. Water whose
     hue lies at the edge of the target's tolerance, under sensor noise, holds target-hue pixels
@@ -81,25 +82,40 @@ def target_mask(hue: np.ndarray, target_hues: np.ndarray, dense_px: int = 7, str
     the pixels farther than `dense_px` from every region have target hue, the mask is the regions
     alone. Otherwise (clean water: 0-0.05 % on the two generators, speckled harbour water
     0.5-28 %) it is every target-hue pixel, so the creature's thin arms, fins and rim keep their
-    part of its area and moments."""
+    part of its area and moments. Water with target hue in 40 % of its pixels holds half-full
+    neighbourhoods all over (harbour 1038: a tenth of them), regions that merge with the creature
+    and pull its blob's centroid off: with `above_water_sd` > 0 a region's neighbourhood must also
+    hold that many binomial standard deviations more target hue than the frame's median one, the
+    water's (the creature covers less than half the frame; a full neighbourhood always counts)."""
     lut = np.zeros(256, np.uint8)
     lut[:HUE_BINS] = np.asarray(target_hues, bool)
     on = cv2.LUT(hue, lut)
-    region = on & (cv2.boxFilter(on, -1, (dense_px, dense_px), normalize=False)
-                   >= (dense_px * dense_px + 1) // 2).astype(np.uint8)
+    count = cv2.boxFilter(on, -1, (dense_px, dense_px), normalize=False)
+    n = dense_px * dense_px
+    region = on & (count >= (n + 1) // 2).astype(np.uint8)
     near = cv2.dilate(region, cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * dense_px + 1,) * 2))
     away = on.size - np.count_nonzero(near)
     stray = np.count_nonzero(on & (1 - near))
-    return (region if stray > stray_max * max(away, 1) else on) * np.uint8(255)
+    if stray <= stray_max * max(away, 1):
+        return on * np.uint8(255)
+    if above_water_sd > 0:
+        r = float(np.median(count)) / n
+        region &= (count >= min(n, math.ceil(n * r + above_water_sd * math.sqrt(n * r * (1.0 - r))))).astype(np.uint8)
+    return region * np.uint8(255)
+
+
+# a seeding region on water speckled with target hue stands this many binomial standard deviations above the
+# water's own density of target hue (`target_mask`): at 4, about 1 in 30000 of the water's neighbourhoods
+ABOVE_WATER_SD = 4.0
 
 
 def target_blobs(hue: np.ndarray, target_hues: np.ndarray, min_px: int, max_blobs: int = 12,
                  merge_px: int = 9) -> list[Blob]:
     """Blobs of the model's target hues in a hue image (largest first): regions of target hue
-    (`target_mask`; pixels scattered in the water do not count). Pieces closer than about
-    `merge_px` (a creature cut up by foam, glints or its own markings) count as one blob; its
-    area and moments are those of the target-hue pixels only."""
-    mask = cv2.morphologyEx(target_mask(hue, target_hues), cv2.MORPH_CLOSE,
+    (`target_mask`, standing `ABOVE_WATER_SD` above the water's; pixels scattered in it do not
+    count). Pieces closer than about `merge_px` (a creature cut up by foam, glints or its own
+    markings) count as one blob; its area and moments are those of the target-hue pixels only."""
+    mask = cv2.morphologyEx(target_mask(hue, target_hues, above_water_sd=ABOVE_WATER_SD), cv2.MORPH_CLOSE,
                             cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (5, 5)))
     grouped = cv2.dilate(mask, cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (merge_px, merge_px)))
     _, labels, stats, _ = cv2.connectedComponentsWithStats(grouped, connectivity=8)
