@@ -15,7 +15,9 @@ on target hue). The candidate that stands out most from what a search of this pa
 elsewhere at its scale (`Detection.standing`) is the estimate, the others the candidate list,
 and `found` is whether it passed (a fit on a small spot of the target's colour may pass while
 the creature itself stands out more: then the creature is the estimate, or nothing is) —
-unless it fails and one that passes stands nearly as high (`ranked`).
+unless it fails and one that passes stands nearly as high (`ranked`). When the first still fails
+after its head-to-tail twin was tried, each candidate that fails its outline test alone is tried
+grown (`grown_outlines`: a fit shrunk inside the creature spills onto the creature itself).
 
 When the target's hues cover most of the pair (a many-hued creature in water of one of its hues;
 a real scene whose background lies within the hue tolerance of the target), seeds come from the
@@ -90,6 +92,8 @@ class EstimatorParams:
     max_absent_parts: float  # detection also needs at most this share of the model's parts absent (vision/parts.py)
     outline_distinctive: bool  # an outer point on a target hue spills by how much more the creature holds of that
     # hue than the pair does (silhouette.distinctive_weight), not wholly (vision/detection.py)
+    outline_grow: float  # when the first candidate fails, one failing its outline alone is tried grown by sqrt(this)
+    # and this (`grown_outlines`; 1 = off)
     passed_standing_ratio: float  # a candidate that passes ranks first when it stands >= this x the top, which fails
     twin_appearance: bool  # let the appearance cue choose between the first candidate and its head-to-tail twin
     twin_min_appearance: float  # ...the twin is taken when its appearance score is at least this,
@@ -113,6 +117,7 @@ class EstimatorParams:
             ("aspect_max", self.aspect_max >= 1.0, "must be >= 1"),
             ("layout_share", 0.0 <= self.layout_share <= 1.0, "must be in [0, 1]"),
             ("contour_grow", self.contour_grow >= 1.0, "must be >= 1"),
+            ("outline_grow", self.outline_grow >= 1.0, "must be >= 1"),
             ("group_reach", self.group_reach >= 0, "must be >= 0"),
             ("passed_standing_ratio", 0.0 <= self.passed_standing_ratio <= 1.0, "must be in [0, 1]"),
             ("twin_min_appearance", -1.0 <= self.twin_min_appearance <= 1.0, "must be in [-1, 1]"),
@@ -287,6 +292,8 @@ def acquisition(model: PhotoModel, left_bgr: np.ndarray, right_bgr: np.ndarray, 
         search = dict(islands)[results[0][1].source]
         results[0] = yield from appearance_twin(results[0], search, looks["grey_frame"], p, seed, looks["value_frame"],
                                                 looks["parts"], looks["chroma"], looks["weight"])
+    if p.outline_grow > 1.0 and results and not results[0][0].passed:  # after the twin: it draws from the islands' rng
+        results = yield from grown_outlines(results, dict(islands), looks, p, seed)
     return Acquired(results, islands)
 
 
@@ -342,6 +349,40 @@ def appearance_twin(first: tuple[Detection, Candidate], search: PoseSearch, grey
     if d.passed and not d_t.passed:
         return first
     return d_t, twin
+
+
+# a grown fit replaces its candidate when its outline spills at most this share of the candidate's
+# (`grown_outlines`): a fit shrunk inside the creature spills where the creature goes on past its
+# outline, and grown to the creature's size that spill goes with it; where the model lies on
+# something of another shape, the spill stays where the shapes differ
+GROWN_SPILL_RATIO = 0.5
+
+
+def grown_outlines(results: list[tuple[Detection, Candidate]], searches: dict[str, PoseSearch], looks: dict,
+                   p: EstimatorParams, seed: int = 0) -> Generator[int, None, list[tuple[Detection, Candidate]]]:
+    """The candidates, re-ranked after each one that fails its outline test alone (its contrast
+    and its parts pass) was tried grown: scaled about its origin by sqrt(`outline_grow`) and by
+    `outline_grow` (alpha / f), each from the candidate and refined by a short GA in a window of
+    alpha +- 8 % (`PoseSearch.grown_steps`); the fittest of them, when the hue fitness rose. An
+    island's GA can end on a fit shrunk inside the creature (harbour 1056: a fish whose highlights
+    carry no hue, 0.742 at 1.25 x the truth's alpha), whose outer points land on the creature
+    itself. The grown fit replaces the candidate when it passes detection and its outline spills
+    at most GROWN_SPILL_RATIO of the candidate's spill. `searches`: the islands by name (the
+    candidates' sources); `looks`: what `detect` reads of the pair. One generation per step."""
+    out = list(results)
+    for k, (d, c) in enumerate(results):
+        if d.passed or d.contrast < p.min_contrast or d.absent_parts > p.max_absent_parts:
+            continue  # passes, or fails on more than its outline (nan parts: none on hue, not a reason)
+        search, grown = searches[c.source], c
+        for f in (math.sqrt(p.outline_grow), p.outline_grow):
+            g = yield from search.grown_steps(c, (f,))
+            grown = g if g.fitness > grown.fitness else grown
+        if grown is c:
+            continue
+        d_g = detect(grown, search.model, search.frame, search.rig, search.fit_params, p, seed=seed, **looks)
+        if d_g.passed and d_g.outer_on_target <= GROWN_SPILL_RATIO * d.outer_on_target:
+            out[k] = (d_g, grown)
+    return ranked(out, p.passed_standing_ratio)
 
 
 def ranked(results: list[tuple[Detection, Candidate]], passed_ratio: float) -> list[tuple[Detection, Candidate]]:
