@@ -42,9 +42,11 @@ def turned_scene():
     return sc, build_photo_model(sc.photo, CFG.photo_model)
 
 
-def run(turned_scene, twin_appearance: bool, max_absent_parts: float = CFG.estimator.max_absent_parts):
+def run(turned_scene, twin_appearance: bool, max_absent_parts: float = CFG.estimator.max_absent_parts,
+        island_turn_gain: float = CFG.estimator.island_turn_gain):
     sc, model = turned_scene
-    p = dataclasses.replace(CFG.estimator, twin_appearance=twin_appearance, max_absent_parts=max_absent_parts)
+    p = dataclasses.replace(CFG.estimator, twin_appearance=twin_appearance, max_absent_parts=max_absent_parts,
+                            island_turn_gain=island_turn_gain)
     est = estimate(model, sc.left, sc.right, sc.rig, CFG.ga, p, CFG.fitness, seed=21)
     t = np.array(sc.truth["position_mm"])
     if not est.found:
@@ -54,11 +56,20 @@ def run(turned_scene, twin_appearance: bool, max_absent_parts: float = CFG.estim
 
 
 def test_the_appearance_cue_turns_a_head_to_tail_fit_back(turned_scene):
-    est0, heading0, off0 = run(turned_scene, twin_appearance=False, max_absent_parts=1.0)
-    est1, heading1, off1 = run(turned_scene, twin_appearance=True)
+    # without the islands' own turned twins (island_turn_gain 1 = off), which turn this fit by fitness (below)
+    est0, heading0, off0 = run(turned_scene, twin_appearance=False, max_absent_parts=1.0, island_turn_gain=1.0)
+    est1, heading1, off1 = run(turned_scene, twin_appearance=True, island_turn_gain=1.0)
     assert est0.found and heading0 > 150  # hue alone (and no parts check): turned
     # the parts check alone rejects the turned fit (its arms lie where the mantle's tip should be)
-    assert not run(turned_scene, twin_appearance=False)[0].found
+    assert not run(turned_scene, twin_appearance=False, island_turn_gain=1.0)[0].found
     assert est1.found and heading1 < 10 and off1 < 0.05  # with the cue: the right way round, within 5 %
     # the same place: the twin turned about the creature's middle, not a fit elsewhere
     assert np.linalg.norm(est1.position_mm - est0.position_mm) < 0.1 * est0.position_mm[2]
+
+
+def test_an_islands_turned_twin_that_fits_clearly_better_is_kept(turned_scene):
+    """The same scene with the islands' turned twins on (the default) and neither the appearance cue nor
+    the parts check: its island's head-to-tail fit is turned by the hue fitness alone (the twin fits at
+    least island_turn_gain better), found the right way round within 5 %."""
+    est, heading, off = run(turned_scene, twin_appearance=False, max_absent_parts=1.0)
+    assert est.found and heading < 10 and off < 0.05

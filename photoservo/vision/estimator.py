@@ -99,6 +99,7 @@ class EstimatorParams:
     twin_min_appearance: float  # ...the twin is taken when its appearance score is at least this,
     twin_appearance_margin: float  # ...at least this above the candidate's,
     twin_fitness_tol: float  # ...and its fitness at most this below the candidate's
+    island_turn_gain: float  # each island's head-to-tail twin is kept when it fits at least this much better
     confidence_scale: float  # width of the logistic confidence around min_contrast
 
     def validate(self, where: str) -> None:
@@ -123,6 +124,7 @@ class EstimatorParams:
             ("twin_min_appearance", -1.0 <= self.twin_min_appearance <= 1.0, "must be in [-1, 1]"),
             ("twin_appearance_margin", self.twin_appearance_margin >= 0, "must be >= 0"),
             ("twin_fitness_tol", self.twin_fitness_tol >= 0, "must be >= 0"),
+            ("island_turn_gain", self.island_turn_gain >= 0, "must be >= 0"),
             ("max_outer_if_appearance", 0.0 <= self.max_outer_if_appearance <= 1.0, "must be in [0, 1]"),
             ("max_absent_parts", 0.0 <= self.max_absent_parts <= 1.0, "must be in [0, 1]"),
             ("min_generations", 0 <= self.min_generations <= self.max_generations,
@@ -260,23 +262,19 @@ def acquisition(model: PhotoModel, left_bgr: np.ndarray, right_bgr: np.ndarray, 
     if not islands:
         return Acquired([], [])
     firsts = []
-    for _, search in islands:
-        firsts.append((yield from search.steps()))
-    # the look-alike twins (mirror, heading + 180 deg), and where the contour rule scores the grown fits,
-    # are tried for the leading island only
+    for (_, search), s in zip(islands, ss.spawn(len(islands))):
+        c = yield from search.steps()
+        # an island converged head-to-tail, displaced along the body and tilted wrong (a crab beside a look-alike,
+        # the other individual's legs): its turned twin (a short GA of its own stream) is kept when it fits
+        # clearly better; twins that fit alike (a squid of one hue) are the appearance cue's (`appearance_twin`)
+        if np.isfinite(c.fitness) and p.island_turn_gain < 1.0:
+            t = yield from search.turned_steps(c, *TURNED_WINDOWS[1], tilt_deg=ISLAND_TURN_TILT_DEG,
+                                               rng=np.random.default_rng(s))
+            c = t if t.fitness > c.fitness + p.island_turn_gain else c
+        firsts.append(c)
+    # the leading island's fit is refined (`_refined`), before detection
     lead = int(np.argmax([c.fitness for c in firsts]))
-    search = islands[lead][1]
-    if frame.chroma is not None and p.contour_grow > 1.0:  # the contour rule's narrow peak (PoseSearch.grown_steps)
-        firsts[lead] = yield from search.grown_steps(firsts[lead], (1.0, math.sqrt(p.contour_grow), p.contour_grow))
-    firsts[lead] = yield from search.twin_steps(firsts[lead])
-    if p.plane_refine and np.isfinite(firsts[lead].fitness):
-        firsts[lead] = yield from search.tilt_steps(firsts[lead], left_bgr, right_bgr)
-    if p.aspect_max > 1.0 and np.isfinite(firsts[lead].fitness):
-        g0 = search.ga.generation
-        c = search.refine_aspect(firsts[lead], p.aspect_max)
-        if c.fitness >= firsts[lead].fitness + p.aspect_min_gain:
-            firsts[lead] = c
-        yield search.ga.generation - g0
+    firsts[lead] = yield from _refined(islands[lead][1], firsts[lead], frame, left_bgr, right_bgr, p)
     results = []
     # what every candidate's detection reads of the pair, computed once per acquisition
     looks = dict(grey_frame=stereo_grey(left_bgr, right_bgr), value_frame=stereo_value(left_bgr, right_bgr),
@@ -296,6 +294,28 @@ def acquisition(model: PhotoModel, left_bgr: np.ndarray, right_bgr: np.ndarray, 
         results = yield from grown_outlines(results, dict(islands), looks, p, seed)
     return Acquired(results, islands)
 
+
+def _refined(search: PoseSearch, c: Candidate, frame: StereoHue, left_bgr: np.ndarray, right_bgr: np.ndarray,
+             p: EstimatorParams) -> Generator[int, None, Candidate]:
+    """The leading island's refinements, one generation per step: where the contour rule scores, the
+    grown fits (`PoseSearch.grown_steps`: its narrow peak); the look-alike twins (mirror, heading + 180
+    deg); the tilt from the stereo plane; the per-axis size."""
+    if frame.chroma is not None and p.contour_grow > 1.0:
+        c = yield from search.grown_steps(c, (1.0, math.sqrt(p.contour_grow), p.contour_grow))
+    c = yield from search.twin_steps(c)
+    if p.plane_refine and np.isfinite(c.fitness):
+        c = yield from search.tilt_steps(c, left_bgr, right_bgr)
+    if p.aspect_max > 1.0 and np.isfinite(c.fitness):
+        g0 = search.ga.generation
+        k = search.refine_aspect(c, p.aspect_max)
+        if k.fitness >= c.fitness + p.aspect_min_gain:
+            c = k
+        yield search.ga.generation - g0
+    return c
+
+
+# each island's turned twin (`acquisition`; kept when it fits `island_turn_gain` better): its tilt window (deg)
+ISLAND_TURN_TILT_DEG = 30.0
 
 # the head-to-tail twin's refinement windows (`PoseSearch.turned_steps`), tried in turn until one
 # wins: (position +- this fraction of the depth, alpha within a factor 1 +- this). A fit displaced

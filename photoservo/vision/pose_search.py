@@ -363,12 +363,14 @@ class PoseSearch:
         return drive(self.local_steps(R, t, alpha, position_frac, heading_deg, tilt_deg, alpha_frac))
 
     def local_steps(self, R: np.ndarray, t: np.ndarray, alpha: float, position_frac: float, heading_deg: float,
-                    tilt_deg: float, alpha_frac: float) -> Generator[int, None, Candidate]:
-        """`local_search` one generation per step (see `steps`)."""
+                    tilt_deg: float, alpha_frac: float, rng: np.random.Generator | None = None
+                    ) -> Generator[int, None, Candidate]:
+        """`local_search` one generation per step (see `steps`); `rng`: its own random stream
+        (default: this search's)."""
         p = self.est_params
         short = dataclasses.replace(p, min_generations=max(1, p.patience // 2), patience=max(2, p.patience // 2),
                                     max_generations=max(p.patience, p.max_generations // 4))
-        sub = PoseSearch(self.model, self.rig, self.frame, self.ga.params, short, self.fit_params, self.ga.rng)
+        sub = PoseSearch(self.model, self.rig, self.frame, self.ga.params, short, self.fit_params, rng or self.ga.rng)
         sub.ga.reset(sub.space.window(R, t, alpha, position_mm=position_frac * float(t[2]), heading_deg=heading_deg,
                                       tilt_deg=tilt_deg, alpha_frac=alpha_frac))
         sub.seed(R, t, alpha)
@@ -447,16 +449,18 @@ class PoseSearch:
                 best = c
         return Candidate(best.R, best.position_mm, best.alpha, best.fitness, self.ga.generation, source)
 
-    def turned_steps(self, best: Candidate, position_frac: float, alpha_frac: float
-                     ) -> Generator[int, None, Candidate]:
+    def turned_steps(self, best: Candidate, position_frac: float, alpha_frac: float, tilt_deg: float = 15.0,
+                     rng: np.random.Generator | None = None) -> Generator[int, None, Candidate]:
         """The head-to-tail twin of `best` at the same place, one generation per step (see
         `steps`): turned about the photo mask's centroid (`turned_about_centroid`) and refined by a
-        short GA in a window of position +- position_frac of the depth, heading and tilt +- 15 deg,
+        short GA in a window of position +- position_frac of the depth, heading +- 15 deg, tilt +- tilt_deg,
         alpha within (1 +- alpha_frac) (the twin's per-axis k is 1). The estimator lets the
-        appearance cue choose between the candidate and its twin (`estimator.appearance_twin`)."""
+        appearance cue choose between the candidate and its twin (`estimator.appearance_twin`), and keeps
+        an island's twin that fits better (`estimator.acquisition`). `rng`: the short GA's own random
+        stream (default: this search's)."""
         R, t = turned_about_centroid(best.R, best.position_mm, best.alpha, self.model, best.aspect)
         c = yield from self.local_steps(R, t, best.alpha, position_frac=position_frac, heading_deg=15.0,
-                                        tilt_deg=15.0, alpha_frac=alpha_frac)
+                                        tilt_deg=tilt_deg, alpha_frac=alpha_frac, rng=rng)
         return dataclasses.replace(c, source=best.source)
 
     def refine_tilt(self, best: Candidate, left_bgr: np.ndarray, right_bgr: np.ndarray) -> Candidate:
