@@ -211,11 +211,16 @@ def contour_cases(R: np.ndarray, t: np.ndarray, alpha: np.ndarray, model: PhotoM
     return tuple(np.stack(x, axis=1) for x in zip(*cams))  # type: ignore[return-value]
 
 
+def _on_target(h: np.ndarray, model: PhotoModel) -> np.ndarray:
+    """Which hue values h (any shape; NO_HUE and the other values >= HUE_BINS: none) are target hues."""
+    return (h < HUE_BINS) & np.asarray(model.target_hues, bool)[np.minimum(h, HUE_BINS - 1)]
+
+
 def contour_counts_reference(R: np.ndarray, t: np.ndarray, alpha: np.ndarray, model: PhotoModel,
                              frame: StereoHue, rig: Rig, params: FitnessParams) -> np.ndarray:
     """`contour_counts` in numpy (the specification, on `contour_cases`)."""
     h, _, ok, edge = contour_cases(R, t, alpha, model, frame, frame.chroma, rig, params)
-    target = (h < HUE_BINS) & np.asarray(model.target_hues, bool)[np.minimum(h, HUE_BINS - 1)]
+    target = _on_target(h, model)
     return np.stack([(ok & target & edge).sum(-1), (ok & target & ~edge).sum(-1),
                      (ok & (h >= HUE_BINS) & edge).sum(-1)], axis=-1).astype(np.int64)
 
@@ -225,13 +230,8 @@ def outline_spill_reference(R: np.ndarray, t: np.ndarray, alpha: np.ndarray, mod
                             weight: np.ndarray) -> np.ndarray:
     """`outline_spill` in numpy (the specification, on `contour_cases`)."""
     h, h_in, judged, edge = contour_cases(R, t, alpha, model, frame, chroma, rig, params)
-    target_hues = np.asarray(model.target_hues, bool)
-
-    def on_target(x: np.ndarray) -> np.ndarray:
-        return (x < HUE_BINS) & target_hues[np.minimum(x, HUE_BINS - 1)]
-
-    target = on_target(h)
-    goes_on = target & judged & ~edge & on_target(h_in)
+    target = _on_target(h, model)
+    goes_on = target & judged & ~edge & _on_target(h_in, model)
     rim = target & ~(judged & edge) & ~goes_on
     return goes_on.sum(axis=-1) + (np.asarray(weight, np.float64)[h] * rim).sum(axis=-1)
 
