@@ -250,6 +250,15 @@ def _combine(counts: np.ndarray, n_in: int, n_out: int, params: FitnessParams) -
     return np.maximum(F[:, 0], 0.0) * np.maximum(F[:, 1], 0.0)
 
 
+def point_weight(model: PhotoModel, params: FitnessParams) -> float:
+    """The fitness' resolution (method step 3): what one inner point turning from no hue to a match
+    in both cameras adds to F, w_inner_match / (w_inner_match·N_in + w_outer_match·N_out) with the
+    cameras combined by their mean. Two poses that differ by less score alike to within the
+    projection's rounding to pixels."""
+    den = params.w_inner_match * len(model.inner_uv) + params.w_outer_match * len(model.outer_uv)
+    return params.w_inner_match / den if den > 0 else 0.0
+
+
 def fitness_reference(R: np.ndarray, t: np.ndarray, alpha: np.ndarray, model: PhotoModel,
                       frame: StereoHue, rig: Rig, params: FitnessParams) -> np.ndarray:
     """Stereo fitness (P,) of a population, numpy reference of method step 3 (module docstring)."""

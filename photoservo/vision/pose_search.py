@@ -433,10 +433,12 @@ class PoseSearch:
                 self.ga.inject(self.space.encode(c.R, c.position_mm, c.alpha))
         return Candidate(best.R, best.position_mm, best.alpha, best.fitness, self.ga.generation, best.source)
 
-    def grown_steps(self, best: Candidate, factors: tuple[float, ...]) -> Generator[int, None, Candidate]:
+    def grown_steps(self, best: Candidate, factors: tuple[float, ...],
+                    min_gain: float = 0.0) -> Generator[int, None, Candidate]:
         """`best` scaled about its origin by each factor f in turn (alpha / f: the model f times as large
         at the same place; f = 1 refines it in place; each from the best so far), refined by a short GA
-        in the twins' window; the best of them, one generation per step (see `steps`). Where the contour
+        in the twins' window; the best of them, one generation per step (see `steps`); a grown one (f != 1)
+        only when it scores more than `min_gain` higher. Where the contour
         rule scores (vision/contour.py) the fitness peaks narrowly at the target's size, where its
         outline meets the edges, above broad ridges of fits shrunk inside the target (every inner point
         on it, edges found at an occluder) or grown past it: the island's GA settles on a ridge (the real
@@ -445,7 +447,7 @@ class PoseSearch:
         for f in factors:
             c = yield from self.local_steps(best.R, best.position_mm, best.alpha / f, position_frac=0.03,
                                             heading_deg=15.0, tilt_deg=15.0, alpha_frac=0.08)
-            if c.fitness > best.fitness:
+            if c.fitness > best.fitness + (min_gain if f != 1.0 else 0.0):
                 best = c
         return Candidate(best.R, best.position_mm, best.alpha, best.fitness, self.ga.generation, source)
 
