@@ -49,6 +49,7 @@ from photoservo.vision.pose_search import Candidate, PoseSearch, drive
 from photoservo.vision.rig import Rig
 from photoservo.vision.seeding import ModelShape, blob_pairs, group_pairs, seed_genes, target_mask
 from photoservo.vision.silhouette import distinctive_weight, silhouette_pairs
+from photoservo.vision.stereo_plane import pairs_other_surfaces
 
 
 @dataclass(frozen=True)
@@ -286,6 +287,8 @@ def acquisition(model: PhotoModel, left_bgr: np.ndarray, right_bgr: np.ndarray, 
             results.append((detect(c, model, frame, rig, fit_params, p, seed=seed, **looks),
                             dataclasses.replace(c, source=name)))
     results = ranked(results, p.passed_standing_ratio)
+    if frame.chroma is not None:  # hues everywhere: a pose's two images may lie on two parts of the target's hues
+        results = _same_surface_first(results, model, frame, rig, looks["grey_frame"], p.passed_standing_ratio)
     if p.twin_appearance and results:
         search = dict(islands)[results[0][1].source]
         results[0] = yield from appearance_twin(results[0], search, looks["grey_frame"], p, seed, looks["value_frame"],
@@ -406,6 +409,18 @@ def grown_outlines(results: list[tuple[Detection, Candidate]], searches: dict[st
         if d_g.passed and d_g.outer_on_target <= GROWN_SPILL_RATIO * d.outer_on_target:
             out[k] = (d_g, grown)
     return ranked(out, p.passed_standing_ratio)
+
+
+def _same_surface_first(results: list[tuple[Detection, Candidate]], model: PhotoModel, frame: StereoHue, rig: Rig,
+                        grey_frame: StereoGrey, passed_ratio: float) -> list[tuple[Detection, Candidate]]:
+    """The candidates `ranked`, after the others those whose two images lie on two surfaces (stereo_plane.
+    pairs_other_surfaces: a region of the target's hues wider than the model pairs at a wrong depth too)."""
+    on_target = np.zeros(256, bool)
+    on_target[:HUE_BINS] = np.asarray(model.target_hues, bool)
+    off = [pairs_other_surfaces(c.R_model, c.position_mm, c.alpha, model, grey_frame.left, grey_frame.right, rig,
+                                on_target=on_target[frame.left]) for _, c in results]
+    return (ranked([r for r, o in zip(results, off) if not o], passed_ratio)
+            + ranked([r for r, o in zip(results, off) if o], passed_ratio))
 
 
 def ranked(results: list[tuple[Detection, Candidate]], passed_ratio: float) -> list[tuple[Detection, Candidate]]:

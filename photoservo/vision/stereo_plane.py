@@ -50,6 +50,63 @@ def fit_target_plane(R: np.ndarray, t: np.ndarray, alpha: float, model: PhotoMod
     target's hue; inner points landing elsewhere (water, glints) are not used. At most
     `max_points` inner points (evenly thinned). The right image may sit up to `max_shift_px` off
     the computed epipolar lines (calibration error). None when fewer than `min_points` match."""
+    lam = np.linspace(1.0 - search, 1.0 + search, steps)
+    m = _ray_matches(R, t, alpha, model, left_grey, right_grey, rig, lam, half, min_ncc, max_points, on_target,
+                     max_shift_px)
+    if m is None or len(m[0]) < min_points:
+        return None
+    X, k, ncc = m
+    # parabola through the three samples around the peak: sub-step lambda
+    n = np.arange(len(X))
+    y0, y1, y2 = ncc[n, k - 1], ncc[n, k], ncc[n, k + 1]
+    den = y0 - 2 * y1 + y2
+    off = np.where(den < -1e-9, 0.5 * (y0 - y2) / np.where(den < -1e-9, den, -1.0), 0.0)
+    step = lam[1] - lam[0]
+    P = X * (lam[k] + np.clip(off, -0.5, 0.5) * step)[:, None]
+    return _robust_plane(P, min_points)
+
+
+def stereo_depth_ratio(R: np.ndarray, t: np.ndarray, alpha: float, model: PhotoModel, left_grey: np.ndarray,
+                       right_grey: np.ndarray, rig: Rig, on_target: np.ndarray | None = None,
+                       span: float = 2.0, steps: int = 49, min_points: int = 20, max_points: int = 100) -> float:
+    """Where the two images put the surface under a pose, as a share of the pose's depth: the inner
+    points (on target hue when `on_target` is given) matched between the images along their lines
+    of sight as `fit_target_plane` does, over depths lambda·X with lambda from 1/span to span
+    (geometric steps), and the median lambda of the points that match (NCC >= 0.7, textured, peak
+    inside the range). 1 when the pose's depth is the one both cameras see; far from 1 when the
+    two images' target hues under the pose are different surfaces (a pose whose stereo parallax pairs
+    two parts of a region wider than the model); nan when fewer than `min_points` match (a surface
+    without texture says nothing)."""
+    lam = np.geomspace(1.0 / span, span, steps)
+    m = _ray_matches(R, t, alpha, model, left_grey, right_grey, rig, lam, max_points=max_points, on_target=on_target,
+                     shift_points=20)
+    if m is None or len(m[0]) < min_points:
+        return float("nan")
+    return float(np.median(lam[m[1]]))
+
+
+# a pose whose depth lies more than this factor from where both images put the surface under it
+# (`stereo_depth_ratio`) pairs two different surfaces (`pairs_other_surfaces`)
+STEREO_DEPTH_TOL = 1.15
+
+
+def pairs_other_surfaces(R: np.ndarray, t: np.ndarray, alpha: float, model: PhotoModel, left_grey: np.ndarray,
+                         right_grey: np.ndarray, rig: Rig, on_target: np.ndarray | None = None) -> bool:
+    """The pose's depth is more than STEREO_DEPTH_TOL off where both images put the surface under
+    it (`stereo_depth_ratio`); False without evidence (too few textured points match)."""
+    r = stereo_depth_ratio(R, t, alpha, model, left_grey, right_grey, rig, on_target=on_target)
+    return bool(np.isfinite(r) and abs(np.log(r)) > np.log(STEREO_DEPTH_TOL))
+
+
+def _ray_matches(R: np.ndarray, t: np.ndarray, alpha: float, model: PhotoModel, left_grey: np.ndarray,
+                 right_grey: np.ndarray, rig: Rig, lam: np.ndarray, half: int = 4, min_ncc: float = 0.7,
+                 max_points: int = 250, on_target: np.ndarray | None = None, max_shift_px: float = 3.0,
+                 shift_points: int = 60) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+    """The inner points of a pose matched along their lines of sight (module docstring): for each
+    left patch, the NCC with the right patches at lambda·X for each lambda (N, S), after the
+    calibration's vertical shift is found on about `shift_points` of them. Returns (X (M, 3) mm,
+    peak index k (M,), ncc (M, S)) of the M points that match: textured, NCC peak >= min_ncc
+    inside the range; None when no point is left to match."""
     uv_m = model.inner_uv[:: max(1, -(-len(model.inner_uv) // max_points))]
     Xm = np.column_stack([uv_m / alpha, np.zeros(len(uv_m))])
     X = Xm @ np.asarray(R).T + np.asarray(t)  # (N, 3) left frame
@@ -57,11 +114,10 @@ def fit_target_plane(R: np.ndarray, t: np.ndarray, alpha: float, model: PhotoMod
     if on_target is not None:
         hit = _on_target(uv_l, on_target)
         X, uv_l = X[hit], uv_l[hit]
-        if len(X) < min_points:
-            return None
+    if len(X) == 0:
+        return None
     pl, ok_l = patches(left_grey, uv_l, half)
     zl = _zero_mean_unit(pl)
-    lam = np.linspace(1.0 - search, 1.0 + search, steps)
     Xs = X[:, None, :] * lam[None, :, None]  # (N, S, 3) along each left ray
     uv_r = project_points(Xs @ rig.R.T + rig.T, rig.right)
 
@@ -72,26 +128,16 @@ def fit_target_plane(R: np.ndarray, t: np.ndarray, alpha: float, model: PhotoMod
     # A calibration error shifts the right image off the computed epipolar lines (0.1 deg of
     # stereo rotation is 1.4 px at f = 800 px); over one target that shift is nearly constant:
     # find it first on a subset of points (best summed peak NCC over vertical offsets).
-    sub = np.arange(0, len(X), max(1, len(X) // 60))
+    sub = np.arange(0, len(X), max(1, len(X) // shift_points))
     offsets = np.arange(-max_shift_px, max_shift_px + 0.25, 0.5)
     score = [np.sum(np.maximum(ncc_at(dv, sub).max(axis=1), 0.0)) for dv in offsets]
     ncc = ncc_at(float(offsets[int(np.argmax(score))]), np.arange(len(X)))
     # texture needed: a flat patch matches anything
     contrast = pl.std(axis=(-1, -2))
     k = np.argmax(ncc, axis=1)
-    n = np.arange(len(X))
-    best = ncc[n, k]
-    good = ok_l & (contrast > 4.0) & (best >= min_ncc) & (k > 0) & (k < steps - 1)
-    if good.sum() < min_points:
-        return None
-    n, k = n[good], k[good]
-    # parabola through the three samples around the peak: sub-step lambda
-    y0, y1, y2 = ncc[n, k - 1], ncc[n, k], ncc[n, k + 1]
-    den = y0 - 2 * y1 + y2
-    off = np.where(den < -1e-9, 0.5 * (y0 - y2) / np.where(den < -1e-9, den, -1.0), 0.0)
-    step = lam[1] - lam[0]
-    P = X[n] * (lam[k] + np.clip(off, -0.5, 0.5) * step)[:, None]
-    return _robust_plane(P, min_points)
+    best = ncc[np.arange(len(X)), k]
+    good = ok_l & (contrast > 4.0) & (best >= min_ncc) & (k > 0) & (k < len(lam) - 1)
+    return X[good], k[good], ncc[good]
 
 
 def _on_target(uv: np.ndarray, on_target: np.ndarray) -> np.ndarray:
