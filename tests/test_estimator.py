@@ -191,10 +191,10 @@ def test_detection_needs_both_cameras_and_the_outline(scene):
 
 
 def test_a_passing_candidate_nearly_as_high_goes_before_a_failing_first():
-    """estimator.ranked on hand-made candidates: by standing, but a first that fails detection
+    """candidates.ranked on hand-made candidates: by standing, but a first that fails detection
     yields to the best passing one standing at least passed_standing_ratio as high."""
     from photoservo.vision.detection import Detection
-    from photoservo.vision.estimator import ranked
+    from photoservo.vision.candidates import ranked
     from photoservo.vision.pose_search import Candidate
 
     def cand(x, passed, standing):

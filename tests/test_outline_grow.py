@@ -1,4 +1,4 @@
-"""The grown outline (`estimator.grown_outlines`, `[estimator] outline_grow`): when the first
+"""The grown outline (`candidates.grown_outlines`, `[estimator] outline_grow`): when the first
 candidate fails detection, a candidate that fails its outline test alone is tried grown. An
 island's GA can end on a fit shrunk inside the creature — harbour 1056, a fish whose highlights
 carry no hue, fitted at 1.25 x the truth's alpha — whose outer points land on the creature itself
@@ -18,7 +18,8 @@ from photoservo.sim import harbour
 from photoservo.vision.appearance import stereo_grey, stereo_value
 from photoservo.vision.contour import stereo_chroma
 from photoservo.vision.detection import detect
-from photoservo.vision.estimator import GROWN_SPILL_RATIO, estimate, grown_outlines
+from photoservo.vision.candidates import GROWN_SPILL_RATIO, grown_outlines
+from photoservo.vision.estimator import estimate
 from photoservo.vision.fitness import fitness, stereo_hue
 from photoservo.vision.parts import model_parts
 from photoservo.vision.photo_model import build_photo_model

@@ -228,14 +228,14 @@ def test_the_crate_at_0_6x_is_not_grown_past_it_on_a_point_of_fitness(monkeypatc
     0.004 higher, less than one sampling point (`fitness.point_weight`, 1/115 = 0.0087). A grown fit
     is kept only when it wins by more than that (`PoseSearch.grown_steps`' min_gain); with no margin
     the estimate is the overshoot."""
-    from photoservo.vision import estimator
+    from photoservo.vision import candidates, estimator
 
     c, = real_cases(CFG.photo_model, targets=("crate",), variants=("scaled",))
     tr = c.truth
     size = {}
     for margin in (True, False):
         if not margin:
-            monkeypatch.setattr(estimator, "point_weight", lambda model, params: 0.0)
+            monkeypatch.setattr(candidates, "point_weight", lambda model, params: 0.0)
         est = estimator.estimate(c.model, c.left, c.right, c.rig, CFG.ga, CFG.estimator, CFG.fitness, seed=4)
         assert est.found
         size[margin] = abs(tr["alpha_px_per_mm"] / est.alpha_px_per_mm - 1)

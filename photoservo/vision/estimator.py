@@ -7,17 +7,20 @@ Acquisition (`estimate`): the target's hues (the model's `target_hues`) are segm
 images; blobs are paired along the epipolar lines and triangulated, which gives (u, v, q), the
 apparent scale s from the blob area and two heading hypotheses from the blob's principal axis.
 Each pair seeds one GA island searching a window around it; an optional unseeded island
-searches the whole volume. Every island stops when converged (`Convergence`), then tries the
-pose's look-alike twins (planar-ambiguity mirror, heading + 180 deg). Each island's best is a
-candidate, tested by `detect` (`Detection`: the fitness with the cameras combined by their
-minimum — both must see it — against the pair's own null, and the outline check: few outer points
-on target hue). The candidate that stands out most from what a search of this pair finds
-elsewhere at its scale (`Detection.standing`) is the estimate, the others the candidate list,
-and `found` is whether it passed (a fit on a small spot of the target's colour may pass while
-the creature itself stands out more: then the creature is the estimate, or nothing is) —
-unless it fails and one that passes stands nearly as high (`ranked`). When the first still fails
-after its head-to-tail twin was tried, each candidate that fails its outline test alone is tried
-grown (`grown_outlines`: a fit shrunk inside the creature spills onto the creature itself).
+searches the whole volume. Every island stops when converged (`Convergence`); each island's best
+is a candidate, tested by `detect` (`Detection`: the fitness with the cameras combined by their
+minimum — both must see it — against the pair's own null, the outline check: few outer points
+on target hue, and the parts check). An island whose fit has parts absent and lies near the best
+island's tries its head-to-tail twin (`candidates.turned_islands`); the island leading by fitness
+is refined (its look-alike twins: planar-ambiguity mirror, heading + 180 deg; the stereo plane's
+tilt; the per-axis size). The candidate that stands out most from what a search of this pair
+finds elsewhere at its scale (`Detection.standing`) is the estimate, the others the candidate
+list, and `found` is whether it passed (a fit on a small spot of the target's colour may pass
+while the creature itself stands out more: then the creature is the estimate, or nothing is) —
+unless it fails and one that passes stands nearly as high (`candidates.ranked`). When the first
+still fails after its head-to-tail twin was tried, each candidate that fails its outline test
+alone is tried grown (`candidates.grown_outlines`: a fit shrunk inside the creature spills onto
+the creature itself).
 
 When the target's hues cover most of the pair (a many-hued creature in water of one of its hues;
 a real scene whose background lies within the hue tolerance of the target), seeds come from the
@@ -28,7 +31,6 @@ holds more of than the frame does (`vision/silhouette.py`), alternately.
 from __future__ import annotations
 
 import dataclasses
-import math
 import time
 from collections.abc import Generator
 from dataclasses import dataclass, field
@@ -37,10 +39,12 @@ from typing import Literal
 import numpy as np
 
 from photoservo.errors import InputError
-from photoservo.vision.appearance import StereoGrey, appearance, stereo_grey, stereo_value
-from photoservo.vision.contour import StereoChroma, stereo_chroma
+from photoservo.vision.appearance import stereo_grey, stereo_value
+from photoservo.vision.candidates import (appearance_twin, grown_outlines, ranked, refined, same_surface_first,
+                                          turned_islands)
+from photoservo.vision.contour import stereo_chroma
 from photoservo.vision.detection import Detection, detect
-from photoservo.vision.fitness import FitnessParams, StereoHue, point_weight, stereo_hue
+from photoservo.vision.fitness import FitnessParams, StereoHue, stereo_hue
 from photoservo.vision.ga import GAParams
 from photoservo.vision.hue_layout import layout_pairs
 from photoservo.vision.parts import model_parts
@@ -49,7 +53,6 @@ from photoservo.vision.pose_search import Candidate, PoseSearch, drive
 from photoservo.vision.rig import Rig
 from photoservo.vision.seeding import ModelShape, blob_pairs, group_pairs, seed_genes, target_mask
 from photoservo.vision.silhouette import distinctive_weight, silhouette_pairs
-from photoservo.vision.stereo_plane import pairs_other_surfaces
 
 
 @dataclass(frozen=True)
@@ -101,6 +104,7 @@ class EstimatorParams:
     twin_appearance_margin: float  # ...at least this above the candidate's,
     twin_fitness_tol: float  # ...and its fitness at most this below the candidate's
     island_turn_gain: float  # each island's head-to-tail twin is kept when it fits at least this much better
+    island_turn_within: float  # ...tried for the islands whose fit is within this of the best island's fitness
     confidence_scale: float  # width of the logistic confidence around min_contrast
 
     def validate(self, where: str) -> None:
@@ -126,6 +130,7 @@ class EstimatorParams:
             ("twin_appearance_margin", self.twin_appearance_margin >= 0, "must be >= 0"),
             ("twin_fitness_tol", self.twin_fitness_tol >= 0, "must be >= 0"),
             ("island_turn_gain", self.island_turn_gain >= 0, "must be >= 0"),
+            ("island_turn_within", self.island_turn_within >= 0, "must be >= 0"),
             ("max_outer_if_appearance", 0.0 <= self.max_outer_if_appearance <= 1.0, "must be in [0, 1]"),
             ("max_absent_parts", 0.0 <= self.max_absent_parts <= 1.0, "must be in [0, 1]"),
             ("min_generations", 0 <= self.min_generations <= self.max_generations,
@@ -262,24 +267,19 @@ def acquisition(model: PhotoModel, left_bgr: np.ndarray, right_bgr: np.ndarray, 
     islands = _islands(model, rig, frame, ga_params, p, fit_params, ss, seeded_only)
     if not islands:
         return Acquired([], [])
+    streams = ss.spawn(len(islands))  # the islands' turned twins' own random streams
     firsts = []
-    for (_, search), s in zip(islands, ss.spawn(len(islands))):
-        c = yield from search.steps()
-        # an island converged head-to-tail, displaced along the body and tilted wrong (a crab beside a look-alike,
-        # the other individual's legs): its turned twin (a short GA of its own stream) is kept when it fits
-        # clearly better; twins that fit alike (a squid of one hue) are the appearance cue's (`appearance_twin`)
-        if np.isfinite(c.fitness) and p.island_turn_gain < 1.0:
-            t = yield from search.turned_steps(c, *TURNED_WINDOWS[1], tilt_deg=ISLAND_TURN_TILT_DEG,
-                                               rng=np.random.default_rng(s))
-            c = t if t.fitness > c.fitness + p.island_turn_gain else c
-        firsts.append(c)
-    # the leading island's fit is refined (`_refined`), before detection
+    for _, search in islands:
+        firsts.append((yield from search.steps()))
+    parts = model_parts(model.inner_uv)
+    yield from turned_islands(firsts, islands, streams, parts, p)
+    # the leading island's fit is refined (`refined`), before detection
     lead = int(np.argmax([c.fitness for c in firsts]))
-    firsts[lead] = yield from _refined(islands[lead][1], firsts[lead], frame, left_bgr, right_bgr, p)
+    firsts[lead] = yield from refined(islands[lead][1], firsts[lead], frame, left_bgr, right_bgr, p)
     results = []
     # what every candidate's detection reads of the pair, computed once per acquisition
     looks = dict(grey_frame=stereo_grey(left_bgr, right_bgr), value_frame=stereo_value(left_bgr, right_bgr),
-                 parts=model_parts(model.inner_uv), chroma=frame.chroma or stereo_chroma(left_bgr, right_bgr),
+                 parts=parts, chroma=frame.chroma or stereo_chroma(left_bgr, right_bgr),
                  weight=(distinctive_weight(frame.left, frame.right, model)
                          if p.outline_distinctive and frame.chroma is None else None))
     for (name, search), c in zip(islands, firsts):
@@ -288,7 +288,7 @@ def acquisition(model: PhotoModel, left_bgr: np.ndarray, right_bgr: np.ndarray, 
                             dataclasses.replace(c, source=name)))
     results = ranked(results, p.passed_standing_ratio)
     if frame.chroma is not None:  # hues everywhere: a pose's two images may lie on two parts of the target's hues
-        results = _same_surface_first(results, model, frame, rig, looks["grey_frame"], p.passed_standing_ratio)
+        results = same_surface_first(results, model, frame, rig, looks["grey_frame"], p.passed_standing_ratio)
     if p.twin_appearance and results:
         search = dict(islands)[results[0][1].source]
         results[0] = yield from appearance_twin(results[0], search, looks["grey_frame"], p, seed, looks["value_frame"],
@@ -296,146 +296,6 @@ def acquisition(model: PhotoModel, left_bgr: np.ndarray, right_bgr: np.ndarray, 
     if p.outline_grow > 1.0 and results and not results[0][0].passed:  # after the twin: it draws from the islands' rng
         results = yield from grown_outlines(results, dict(islands), looks, p, seed)
     return Acquired(results, islands)
-
-
-def _refined(search: PoseSearch, c: Candidate, frame: StereoHue, left_bgr: np.ndarray, right_bgr: np.ndarray,
-             p: EstimatorParams) -> Generator[int, None, Candidate]:
-    """The leading island's refinements, one generation per step: where the contour rule scores, the
-    grown fits (`PoseSearch.grown_steps`: its narrow peak); the look-alike twins (mirror, heading + 180
-    deg); the tilt from the stereo plane; the per-axis size."""
-    if frame.chroma is not None and p.contour_grow > 1.0:
-        # a grown fit must win by more than the fitness' resolution: on a small photo-model (the real pair's
-        # crate at 0.6x, 115 points) fits 12-30 % too large score alike within a point of the narrow peak
-        c = yield from search.grown_steps(c, (1.0, math.sqrt(p.contour_grow), p.contour_grow),
-                                          min_gain=point_weight(search.model, search.fit_params))
-    c = yield from search.twin_steps(c)
-    if p.plane_refine and np.isfinite(c.fitness):
-        c = yield from search.tilt_steps(c, left_bgr, right_bgr)
-    if p.aspect_max > 1.0 and np.isfinite(c.fitness):
-        g0 = search.ga.generation
-        k = search.refine_aspect(c, p.aspect_max)
-        if k.fitness >= c.fitness + p.aspect_min_gain:
-            c = k
-        yield search.ga.generation - g0
-    return c
-
-
-# each island's turned twin (`acquisition`; kept when it fits `island_turn_gain` better): its tilt window (deg)
-ISLAND_TURN_TILT_DEG = 30.0
-
-# the head-to-tail twin's refinement windows (`PoseSearch.turned_steps`), tried in turn until one
-# wins: (position +- this fraction of the depth, alpha within a factor 1 +- this). A fit displaced
-# along the body has its twin's centroid off the creature's, and the hue fitness of a creature cut
-# by foam has more than one peak along it: the wider window finds the twin there. The wider window
-# is listed twice on purpose: the second entry is a fresh short GA (new random population) in the
-# same window, a second chance where the first run settled on the wrong peak.
-TURNED_WINDOWS = ((0.03, 0.08), (0.06, 0.15), (0.06, 0.15))
-
-
-def appearance_twin(first: tuple[Detection, Candidate], search: PoseSearch, grey_frame: StereoGrey,
-                    p: EstimatorParams, seed: int = 0, value_frame: StereoGrey | None = None,
-                    parts: np.ndarray | None = None, chroma: StereoChroma | None = None,
-                    weight: np.ndarray | None = None) -> Generator[int, None, tuple[Detection, Candidate]]:
-    """The chosen candidate or its head-to-tail twin at the same place (`PoseSearch.turned_steps`:
-    turned about the photo mask's centroid, refined by a short GA in each of TURNED_WINDOWS in
-    turn), decided by the appearance cue (`vision/appearance.py`): the hue fitness scores a
-    creature of one hue and its turned twin alike, the photo's brightness layout does not. A twin
-    is taken when its fitness is at most `twin_fitness_tol` below the candidate's, its appearance
-    score at least `twin_min_appearance` and `twin_appearance_margin` above the candidate's, and
-    it passes detection whenever the candidate does (it is then re-fitted per axis as the leading
-    island is). A candidate whose own score leaves no room for that (>= min + margin) is kept
-    without a search. `value_frame` (`appearance.stereo_value`): the twin's detection may excuse an
-    outline spill as the candidate's may (vision/detection.py); `parts` (the model's
-    `parts.model_parts`), `chroma` (the pair's a*b* planes) and `weight` (their hues' distinctive
-    weight): as the candidate's detection had them. One generation per step; returns (detection, candidate)."""
-    d, c = first
-    model, frame, rig = search.model, search.frame, search.rig
-
-    def score(x: Candidate) -> float:
-        return appearance(x.R_model, x.position_mm, x.alpha, model, frame, grey_frame, rig)
-
-    a_c = d.appearance if np.isfinite(d.appearance) else score(c)  # detect measured it with these frames
-    if not np.isfinite(a_c) or a_c >= p.twin_min_appearance + p.twin_appearance_margin:
-        return first
-    for position_frac, alpha_frac in TURNED_WINDOWS:
-        twin = yield from search.turned_steps(c, position_frac, alpha_frac)
-        a_t = score(twin) if twin.fitness >= c.fitness - p.twin_fitness_tol else math.nan
-        if a_t >= p.twin_min_appearance and a_t - a_c >= p.twin_appearance_margin:
-            break
-    else:
-        return first
-    if p.aspect_max > 1.0:
-        g0 = search.ga.generation
-        k = search.refine_aspect(twin, p.aspect_max)
-        if k.fitness >= twin.fitness + p.aspect_min_gain:
-            twin = k
-        yield search.ga.generation - g0
-    d_t = detect(twin, model, frame, rig, search.fit_params, p, seed=seed, grey_frame=grey_frame,
-                 value_frame=value_frame, parts=parts, chroma=chroma, weight=weight)
-    if d.passed and not d_t.passed:
-        return first
-    return d_t, twin
-
-
-# a grown fit replaces its candidate when its outline spills at most this share of the candidate's
-# (`grown_outlines`): a fit shrunk inside the creature spills where the creature goes on past its
-# outline, and grown to the creature's size that spill goes with it; where the model lies on
-# something of another shape, the spill stays where the shapes differ
-GROWN_SPILL_RATIO = 0.5
-
-
-def grown_outlines(results: list[tuple[Detection, Candidate]], searches: dict[str, PoseSearch], looks: dict,
-                   p: EstimatorParams, seed: int = 0) -> Generator[int, None, list[tuple[Detection, Candidate]]]:
-    """The candidates, re-ranked after each one that fails its outline test alone (its contrast
-    and its parts pass) was tried grown: scaled about its origin by sqrt(`outline_grow`) and by
-    `outline_grow` (alpha / f), each from the candidate and refined by a short GA in a window of
-    alpha +- 8 % (`PoseSearch.grown_steps`); the fittest of them, when the hue fitness rose. An
-    island's GA can end on a fit shrunk inside the creature (harbour 1056: a fish whose highlights
-    carry no hue, 0.742 at 1.25 x the truth's alpha), whose outer points land on the creature
-    itself. The grown fit replaces the candidate when it passes detection and its outline spills
-    at most GROWN_SPILL_RATIO of the candidate's spill. `searches`: the islands by name (the
-    candidates' sources); `looks`: what `detect` reads of the pair. One generation per step."""
-    out = list(results)
-    for k, (d, c) in enumerate(results):
-        if d.passed or d.contrast < p.min_contrast or d.absent_parts > p.max_absent_parts:
-            continue  # passes, or fails on more than its outline (nan parts: none on hue, not a reason)
-        search, grown = searches[c.source], c
-        for f in (math.sqrt(p.outline_grow), p.outline_grow):
-            g = yield from search.grown_steps(c, (f,))
-            grown = g if g.fitness > grown.fitness else grown
-        if grown is c:
-            continue
-        d_g = detect(grown, search.model, search.frame, search.rig, search.fit_params, p, seed=seed, **looks)
-        if d_g.passed and d_g.outer_on_target <= GROWN_SPILL_RATIO * d.outer_on_target:
-            out[k] = (d_g, grown)
-    return ranked(out, p.passed_standing_ratio)
-
-
-def _same_surface_first(results: list[tuple[Detection, Candidate]], model: PhotoModel, frame: StereoHue, rig: Rig,
-                        grey_frame: StereoGrey, passed_ratio: float) -> list[tuple[Detection, Candidate]]:
-    """The candidates `ranked`, after the others those whose two images lie on two surfaces (stereo_plane.
-    pairs_other_surfaces: a region of the target's hues wider than the model pairs at a wrong depth too)."""
-    on_target = np.zeros(256, bool)
-    on_target[:HUE_BINS] = np.asarray(model.target_hues, bool)
-    off = [pairs_other_surfaces(c.R_model, c.position_mm, c.alpha, model, grey_frame.left, grey_frame.right, rig,
-                                on_target=on_target[frame.left]) for _, c in results]
-    return (ranked([r for r, o in zip(results, off) if not o], passed_ratio)
-            + ranked([r for r, o in zip(results, off) if o], passed_ratio))
-
-
-def ranked(results: list[tuple[Detection, Candidate]], passed_ratio: float) -> list[tuple[Detection, Candidate]]:
-    """The candidates ranked by standing (vision/detection.py), then fitness — except that when
-    the best-standing one fails detection (a look-alike beside the creature, or a fit spilling
-    over the creature's outline), the best-standing candidate that passes goes first if it
-    stands at least `passed_ratio` as high: nearly as far above this pair's null, and passing
-    every test."""
-    out = sorted(results, key=lambda dc: (-dc[0].standing, -dc[1].fitness))
-    if out and not out[0][0].passed and out[0][0].standing > 0:
-        for k, (d, _) in enumerate(out):
-            if d.passed and d.standing >= passed_ratio * out[0][0].standing:
-                out.insert(0, out.pop(k))
-                break
-    return out
 
 
 def estimate(model: PhotoModel, left_bgr: np.ndarray, right_bgr: np.ndarray, rig: Rig,

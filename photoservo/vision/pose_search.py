@@ -457,8 +457,8 @@ class PoseSearch:
         `steps`): turned about the photo mask's centroid (`turned_about_centroid`) and refined by a
         short GA in a window of position +- position_frac of the depth, heading +- 15 deg, tilt +- tilt_deg,
         alpha within (1 +- alpha_frac) (the twin's per-axis k is 1). The estimator lets the
-        appearance cue choose between the candidate and its twin (`estimator.appearance_twin`), and keeps
-        an island's twin that fits better (`estimator.acquisition`). `rng`: the short GA's own random
+        appearance cue choose between the candidate and its twin (`candidates.appearance_twin`), and keeps
+        an island's twin that fits better (`candidates.turned_islands`). `rng`: the short GA's own random
         stream (default: this search's)."""
         R, t = turned_about_centroid(best.R, best.position_mm, best.alpha, self.model, best.aspect)
         c = yield from self.local_steps(R, t, best.alpha, position_frac=position_frac, heading_deg=15.0,

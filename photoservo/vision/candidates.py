@@ -1,0 +1,195 @@
+"""The acquisition's candidates after its GA islands (vision/estimator.py, method steps 4-5): each
+island's head-to-tail twin (`turned_islands`), the leading fit's refinements (`refined`), the
+candidates ranked by standing (`ranked`, vision/detection.py; where the contour rule scores, those
+whose two images lie on two surfaces last: `same_surface_first`), the first candidate's twin chosen
+by the appearance cue (`appearance_twin`), and the candidates failing their outline alone tried
+grown (`grown_outlines`). Each search step is a generator yielding the GA generations
+it ran (`pose_search.drive` runs one to its end; the tracker spreads them over camera frames)."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Generator
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from photoservo.vision.appearance import StereoGrey, appearance
+from photoservo.vision.contour import StereoChroma
+from photoservo.vision.detection import Detection, detect
+from photoservo.vision.fitness import StereoHue, point_weight
+from photoservo.vision.parts import absent_parts
+from photoservo.vision.photo_model import HUE_BINS, PhotoModel
+from photoservo.vision.pose_search import Candidate, PoseSearch
+from photoservo.vision.rig import Rig
+from photoservo.vision.stereo_plane import pairs_other_surfaces
+
+if TYPE_CHECKING:
+    from photoservo.vision.estimator import EstimatorParams
+
+
+def turned_islands(firsts: list[Candidate], islands: list[tuple[str, PoseSearch]],
+                   streams: list[np.random.SeedSequence], parts: np.ndarray, p: EstimatorParams
+                   ) -> Generator[int, None, None]:
+    """Each island's head-to-tail twin, in `firsts` in place: an island converged head-to-tail, displaced
+    along the body and tilted wrong (a crab beside a look-alike, the other individual's legs), has its
+    turned twin (`PoseSearch.turned_steps`, tilt +- ISLAND_TURN_TILT_DEG, a short GA on the island's
+    stream in `streams`) kept when it fits at least `island_turn_gain` better; twins that fit alike (a
+    squid of one hue) are the appearance cue's (`appearance_twin`). Tried only where the twin can
+    matter: for the islands whose fit has more than `max_absent_parts` of its parts absent
+    (`parts.absent_parts`, `parts` the model's labels: a fit head-to-tail has its parts where the photo
+    has others; a fit with its parts in place turned by fitness alone went onto a piece: harbour 1036)
+    and lies within `island_turn_within` of the best island's fitness (a fit further below is another
+    thing's or a piece's). One generation per step."""
+    if p.island_turn_gain >= 1.0 or not firsts:
+        return
+    reach = max(c.fitness for c in firsts) - p.island_turn_within
+    for k, ((_, search), s) in enumerate(zip(islands, streams)):
+        c = firsts[k]
+        if not c.fitness >= reach or not absent_parts(c.R_model, c.position_mm, c.alpha, search.model, search.frame,
+                                                      search.rig, parts) > p.max_absent_parts:
+            continue  # nan parts (none on hue): no twin
+        t = yield from search.turned_steps(c, *TURNED_WINDOWS[1], tilt_deg=ISLAND_TURN_TILT_DEG,
+                                           rng=np.random.default_rng(s))
+        if t.fitness > c.fitness + p.island_turn_gain:
+            firsts[k] = t
+
+
+def refined(search: PoseSearch, c: Candidate, frame: StereoHue, left_bgr: np.ndarray, right_bgr: np.ndarray,
+            p: EstimatorParams) -> Generator[int, None, Candidate]:
+    """The leading island's refinements, one generation per step: where the contour rule scores, the
+    grown fits (`PoseSearch.grown_steps`: its narrow peak); the look-alike twins (mirror, heading + 180
+    deg); the tilt from the stereo plane; the per-axis size."""
+    if frame.chroma is not None and p.contour_grow > 1.0:
+        # a grown fit must win by more than the fitness' resolution: on a small photo-model (the real pair's
+        # crate at 0.6x, 115 points) fits 12-30 % too large score alike within a point of the narrow peak
+        c = yield from search.grown_steps(c, (1.0, math.sqrt(p.contour_grow), p.contour_grow),
+                                          min_gain=point_weight(search.model, search.fit_params))
+    c = yield from search.twin_steps(c)
+    if p.plane_refine and np.isfinite(c.fitness):
+        c = yield from search.tilt_steps(c, left_bgr, right_bgr)
+    if p.aspect_max > 1.0 and np.isfinite(c.fitness):
+        g0 = search.ga.generation
+        k = search.refine_aspect(c, p.aspect_max)
+        if k.fitness >= c.fitness + p.aspect_min_gain:
+            c = k
+        yield search.ga.generation - g0
+    return c
+
+
+# each island's turned twin (`acquisition`; kept when it fits `island_turn_gain` better): its tilt window (deg)
+ISLAND_TURN_TILT_DEG = 30.0
+
+# the head-to-tail twin's refinement windows (`PoseSearch.turned_steps`), tried in turn until one
+# wins: (position +- this fraction of the depth, alpha within a factor 1 +- this). A fit displaced
+# along the body has its twin's centroid off the creature's, and the hue fitness of a creature cut
+# by foam has more than one peak along it: the wider window finds the twin there. The wider window
+# is listed twice on purpose: the second entry is a fresh short GA (new random population) in the
+# same window, a second chance where the first run settled on the wrong peak.
+TURNED_WINDOWS = ((0.03, 0.08), (0.06, 0.15), (0.06, 0.15))
+
+
+def appearance_twin(first: tuple[Detection, Candidate], search: PoseSearch, grey_frame: StereoGrey,
+                    p: EstimatorParams, seed: int = 0, value_frame: StereoGrey | None = None,
+                    parts: np.ndarray | None = None, chroma: StereoChroma | None = None,
+                    weight: np.ndarray | None = None) -> Generator[int, None, tuple[Detection, Candidate]]:
+    """The chosen candidate or its head-to-tail twin at the same place (`PoseSearch.turned_steps`:
+    turned about the photo mask's centroid, refined by a short GA in each of TURNED_WINDOWS in
+    turn), decided by the appearance cue (`vision/appearance.py`): the hue fitness scores a
+    creature of one hue and its turned twin alike, the photo's brightness layout does not. A twin
+    is taken when its fitness is at most `twin_fitness_tol` below the candidate's, its appearance
+    score at least `twin_min_appearance` and `twin_appearance_margin` above the candidate's, and
+    it passes detection whenever the candidate does (it is then re-fitted per axis as the leading
+    island is). A candidate whose own score leaves no room for that (>= min + margin) is kept
+    without a search. `value_frame` (`appearance.stereo_value`): the twin's detection may excuse an
+    outline spill as the candidate's may (vision/detection.py); `parts` (the model's
+    `parts.model_parts`), `chroma` (the pair's a*b* planes) and `weight` (their hues' distinctive
+    weight): as the candidate's detection had them. One generation per step; returns (detection, candidate)."""
+    d, c = first
+    model, frame, rig = search.model, search.frame, search.rig
+
+    def score(x: Candidate) -> float:
+        return appearance(x.R_model, x.position_mm, x.alpha, model, frame, grey_frame, rig)
+
+    a_c = d.appearance if np.isfinite(d.appearance) else score(c)  # detect measured it with these frames
+    if not np.isfinite(a_c) or a_c >= p.twin_min_appearance + p.twin_appearance_margin:
+        return first
+    for position_frac, alpha_frac in TURNED_WINDOWS:
+        twin = yield from search.turned_steps(c, position_frac, alpha_frac)
+        a_t = score(twin) if twin.fitness >= c.fitness - p.twin_fitness_tol else math.nan
+        if a_t >= p.twin_min_appearance and a_t - a_c >= p.twin_appearance_margin:
+            break
+    else:
+        return first
+    if p.aspect_max > 1.0:
+        g0 = search.ga.generation
+        k = search.refine_aspect(twin, p.aspect_max)
+        if k.fitness >= twin.fitness + p.aspect_min_gain:
+            twin = k
+        yield search.ga.generation - g0
+    d_t = detect(twin, model, frame, rig, search.fit_params, p, seed=seed, grey_frame=grey_frame,
+                 value_frame=value_frame, parts=parts, chroma=chroma, weight=weight)
+    if d.passed and not d_t.passed:
+        return first
+    return d_t, twin
+
+
+# a grown fit replaces its candidate when its outline spills at most this share of the candidate's
+# (`grown_outlines`): a fit shrunk inside the creature spills where the creature goes on past its
+# outline, and grown to the creature's size that spill goes with it; where the model lies on
+# something of another shape, the spill stays where the shapes differ
+GROWN_SPILL_RATIO = 0.5
+
+
+def grown_outlines(results: list[tuple[Detection, Candidate]], searches: dict[str, PoseSearch], looks: dict,
+                   p: EstimatorParams, seed: int = 0) -> Generator[int, None, list[tuple[Detection, Candidate]]]:
+    """The candidates, re-ranked after each one that fails its outline test alone (its contrast
+    and its parts pass) was tried grown: scaled about its origin by sqrt(`outline_grow`) and by
+    `outline_grow` (alpha / f), each from the candidate and refined by a short GA in a window of
+    alpha +- 8 % (`PoseSearch.grown_steps`); the fittest of them, when the hue fitness rose. An
+    island's GA can end on a fit shrunk inside the creature (harbour 1056: a fish whose highlights
+    carry no hue, 0.742 at 1.25 x the truth's alpha), whose outer points land on the creature
+    itself. The grown fit replaces the candidate when it passes detection and its outline spills
+    at most GROWN_SPILL_RATIO of the candidate's spill. `searches`: the islands by name (the
+    candidates' sources); `looks`: what `detect` reads of the pair. One generation per step."""
+    out = list(results)
+    for k, (d, c) in enumerate(results):
+        if d.passed or d.contrast < p.min_contrast or d.absent_parts > p.max_absent_parts:
+            continue  # passes, or fails on more than its outline (nan parts: none on hue, not a reason)
+        search, grown = searches[c.source], c
+        for f in (math.sqrt(p.outline_grow), p.outline_grow):
+            g = yield from search.grown_steps(c, (f,))
+            grown = g if g.fitness > grown.fitness else grown
+        if grown is c:
+            continue
+        d_g = detect(grown, search.model, search.frame, search.rig, search.fit_params, p, seed=seed, **looks)
+        if d_g.passed and d_g.outer_on_target <= GROWN_SPILL_RATIO * d.outer_on_target:
+            out[k] = (d_g, grown)
+    return ranked(out, p.passed_standing_ratio)
+
+
+def same_surface_first(results: list[tuple[Detection, Candidate]], model: PhotoModel, frame: StereoHue, rig: Rig,
+                       grey_frame: StereoGrey, passed_ratio: float) -> list[tuple[Detection, Candidate]]:
+    """The candidates `ranked`, after the others those whose two images lie on two surfaces (stereo_plane.
+    pairs_other_surfaces: a region of the target's hues wider than the model pairs at a wrong depth too)."""
+    on_target = np.zeros(256, bool)
+    on_target[:HUE_BINS] = np.asarray(model.target_hues, bool)
+    off = [pairs_other_surfaces(c.R_model, c.position_mm, c.alpha, model, grey_frame.left, grey_frame.right, rig,
+                                on_target=on_target[frame.left]) for _, c in results]
+    return (ranked([r for r, o in zip(results, off) if not o], passed_ratio)
+            + ranked([r for r, o in zip(results, off) if o], passed_ratio))
+
+
+def ranked(results: list[tuple[Detection, Candidate]], passed_ratio: float) -> list[tuple[Detection, Candidate]]:
+    """The candidates ranked by standing (vision/detection.py), then fitness — except that when
+    the best-standing one fails detection (a look-alike beside the creature, or a fit spilling
+    over the creature's outline), the best-standing candidate that passes goes first if it
+    stands at least `passed_ratio` as high: nearly as far above this pair's null, and passing
+    every test."""
+    out = sorted(results, key=lambda dc: (-dc[0].standing, -dc[1].fitness))
+    if out and not out[0][0].passed and out[0][0].standing > 0:
+        for k, (d, _) in enumerate(out):
+            if d.passed and d.standing >= passed_ratio * out[0][0].standing:
+                out.insert(0, out.pop(k))
+                break
+    return out
