@@ -29,7 +29,7 @@ from photoservo.vision.fitness import FitnessParams
 from photoservo.vision.photo_model import PhotoModelParams
 from photoservo.vision.source_config import CamerasParams
 from photoservo.sim.scenes import SynthParams
-from photoservo.vision.tracker import TrackerParams
+from photoservo.vision.tracker_params import TrackerParams
 
 
 @dataclass(frozen=True)

@@ -255,13 +255,18 @@ class Acquired:
 
 def acquisition(model: PhotoModel, left_bgr: np.ndarray, right_bgr: np.ndarray, rig: Rig, ga_params: GAParams,
                 p: EstimatorParams, fit_params: FitnessParams, frame: StereoHue, seed: int = 0,
-                seeded_only: bool = False) -> Generator[int, None, Acquired]:
+                seeded_only: bool = False, provisional: list[tuple[Detection, Candidate]] | None = None
+                ) -> Generator[int, None, Acquired]:
     """The acquisition from the whole volume (module docstring) in steps: yields the GA
     generations each step ran (one island generation, or one of the leading island's
     refinements: its twins, the stereo plane fit, the per-axis size) and returns the ranked
     candidates. `estimate` runs it to its end on one frame; the tracker runs a share of it per
     camera frame (vision/tracker.py). `seeded_only`: no unseeded island over the whole volume
-    (no candidate at all when nothing seeds)."""
+    (no candidate at all when nothing seeds). `provisional` (the tracker's): when there is one
+    island, its fit (after its turned twin) and that fit's detection are appended there as
+    (Detection, Candidate) once it converged, before the refinements and the final detection
+    (the ranking has nothing to choose; the answer is the same island's, refined); the rest of
+    the acquisition and its answer are unchanged."""
     ss = np.random.SeedSequence(seed)
     frame = search_frame(frame, model, left_bgr, right_bgr, p)
     islands = _islands(model, rig, frame, ga_params, p, fit_params, ss, seeded_only)
@@ -273,15 +278,18 @@ def acquisition(model: PhotoModel, left_bgr: np.ndarray, right_bgr: np.ndarray, 
         firsts.append((yield from search.steps()))
     parts = model_parts(model.inner_uv)
     yield from turned_islands(firsts, islands, streams, parts, p)
-    # the leading island's fit is refined (`refined`), before detection
-    lead = int(np.argmax([c.fitness for c in firsts]))
-    firsts[lead] = yield from refined(islands[lead][1], firsts[lead], frame, left_bgr, right_bgr, p)
-    results = []
     # what every candidate's detection reads of the pair, computed once per acquisition
     looks = dict(grey_frame=stereo_grey(left_bgr, right_bgr), value_frame=stereo_value(left_bgr, right_bgr),
                  parts=parts, chroma=frame.chroma or stereo_chroma(left_bgr, right_bgr),
                  weight=(distinctive_weight(frame.left, frame.right, model)
                          if p.outline_distinctive and frame.chroma is None else None))
+    if provisional is not None and len(islands) == 1 and np.isfinite(firsts[0].fitness):
+        provisional.append((detect(firsts[0], model, frame, rig, fit_params, p, seed=seed, **looks),
+                            dataclasses.replace(firsts[0], source=islands[0][0])))
+    # the leading island's fit is refined (`refined`), before detection
+    lead = int(np.argmax([c.fitness for c in firsts]))
+    firsts[lead] = yield from refined(islands[lead][1], firsts[lead], frame, left_bgr, right_bgr, p)
+    results = []
     for (name, search), c in zip(islands, firsts):
         if np.isfinite(c.fitness):
             results.append((detect(c, model, frame, rig, fit_params, p, seed=seed, **looks),

@@ -1,14 +1,19 @@
 """The tracker's re-acquisition (issue 10, vision/tracker.py), its pure parts: which candidate
-of a whole-volume search continues a track, which target-hue blob pairs lie near a lost track,
-and the search window that grows across the view while the depth stays held.
+of a whole-volume search continues a track, whether its final answer is the provisional one the
+track started from, which target-hue blob pairs lie near a lost track, and the search window that
+grows across the view while the depth stays held.
 """
 
 from __future__ import annotations
 
+from collections.abc import Generator
+from dataclasses import dataclass, field
+
 import numpy as np
 
+from photoservo.geometry import heading_tilt_error
 from photoservo.vision.detection import Detection
-from photoservo.vision.estimator import EstimatorParams
+from photoservo.vision.estimator import Acquired, EstimatorParams
 from photoservo.vision.fitness import StereoHue
 from photoservo.vision.ga import Region
 from photoservo.vision.photo_model import PhotoModel
@@ -17,6 +22,35 @@ from photoservo.vision.rig import Rig
 from photoservo.vision.seeding import BlobPair, blob_pairs
 
 DEPTH_GENE = 2  # the depth gene along the left camera's axis (inverse depth q, or z) in both codings
+
+
+@dataclass
+class Acquiring:
+    """A whole-volume search in progress (`estimator.acquisition`) and the frame it runs on (left
+    camera at T_base_left, base frame mm; capture time t, s). `provisional`: where the search puts
+    its one island's (Detection, Candidate) before the refinements (`acquisition(provisional=)`);
+    `taken`: that candidate once the tracker took it (the search then goes on behind the track
+    until its final answer; as a whole-volume search again when the track is lost), with `before`,
+    the track's alpha (px/mm) and predicted position at t (base frame mm, None: no track) from
+    before it: the final answer is chosen as if the provisional one never was."""
+
+    steps: Generator[int, None, Acquired]
+    frame: StereoHue
+    T_base_left: np.ndarray
+    t: float
+    provisional: list[tuple[Detection, Candidate]] = field(default_factory=list)
+    tried: bool = False  # the provisional answer was tried (taken, or the search goes on as before)
+    taken: Candidate | None = None
+    before: tuple[float | None, np.ndarray | None] | None = None
+
+
+def same_answer(a: Candidate, b: Candidate, position_mm: float, heading_deg: float, size_tolerance: float) -> bool:
+    """Two poses of one frame (left camera, mm) the same answer: positions within position_mm, the
+    heading about the normal within heading_deg (a head-to-tail twin is not; the tilt is what the
+    refinements correct: the stereo plane step turned sim first answers by 12-24 deg), alpha
+    within size_tolerance."""
+    return (float(np.linalg.norm(a.position_mm - b.position_mm)) <= position_mm
+            and heading_tilt_error(a.R, b.R)[0] <= heading_deg and abs(b.alpha / a.alpha - 1.0) <= size_tolerance)
 
 
 def choose(results: list[tuple[Detection, Candidate]], T_base_left: np.ndarray, alpha: float | None,

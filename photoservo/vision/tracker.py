@@ -39,6 +39,18 @@ ended on a newer frame (at 2-5 fps its answer is seconds old) the answer is meas
 that frame (`_confirm`: blob pairs near it seeded, acquire_generations more generations)
 and counts only if it passes there; otherwise the track is lost at once.
 
+Provisional answer: when the search has one island (one seed pair: nothing to rank), its fit is
+taken as soon as it passed detection (`acquisition(provisional=)`), before the refinements and the
+final detection, which are about half the search's CPU (a loaded machine's first track came
+seconds later, after the creature had drifted out of the still arm's view). The search then goes
+on behind the track, a quarter of acquire_generations a frame (`_final_step`: on a loaded machine a
+frame's share would take the generations the tracking search needs); its final answer is chosen
+as if the provisional one never was (the track's size and prediction from before it). The same
+answer (`same_answer`: position and heading within the tracking window, size within
+`size_tolerance`): its threshold and size are the track's, its refined pose is seeded. Another one
+(a head-to-tail twin, another island ranked first), or none: the provisional track is dropped and
+the track restarts from the final answer, confirmed on the newest frame like any other.
+
 On known water the tracking search scores only poses that pass the water gates (water_search.py):
 with a generation or two per frame it otherwise settles on tilted or sunken poses, no measurement.
 
@@ -50,15 +62,14 @@ from __future__ import annotations
 import dataclasses
 import math
 import time
-from collections.abc import Generator
 from dataclasses import dataclass
 from typing import Literal, Protocol
 
 import numpy as np
 
-from photoservo.errors import InputError
 from photoservo.geometry import invert_pose, make_pose
-from photoservo.vision.estimator import Acquired, EstimatorParams, acquisition
+from photoservo.vision.detection import Detection
+from photoservo.vision.estimator import EstimatorParams, acquisition
 from photoservo.vision.fitness import FitnessParams, StereoHue
 from photoservo.vision.ga import GAParams
 from photoservo.vision.heave import Heave
@@ -67,55 +78,16 @@ from photoservo.vision.motion_model import MotionModel
 from photoservo.vision.photo_model import PhotoModel
 from photoservo.vision.pose_search import Candidate, PoseSearch
 from photoservo.vision.rig import Rig
-from photoservo.vision.reacquisition import choose, near_pairs, window_region
+from photoservo.vision.reacquisition import Acquiring, choose, near_pairs, same_answer, window_region
 from photoservo.vision.water_search import on_plane, on_water_fitness
 from photoservo.vision.seeding import BlobPair
+from photoservo.vision.tracker_params import TrackerParams
 
 Status = Literal["acquiring", "tracking", "coasting", "lost", "out_of_view"]
 LOCAL_SEARCH_S = 1.0  # lost this long after the last measurement: the whole volume is searched too
 PAIRS_AFTER_S = 0.5  # the last measurement this old (a loaded machine's long frames): blob pairs seeded
 REFERENCE_FPS = 30.0  # the frame rate acquire_generations is a per-frame share at (Hz)...
 SHARE_MAX = 4  # ...and a later frame's share at most this many times it (longer frames feed on themselves)
-
-
-@dataclass(frozen=True)
-class TrackerParams:
-    """[tracker] config: the per-frame GA, the motion model, the measurement tests, the search."""
-
-    generations_per_frame: int  # most GA generations per camera frame
-    time_budget_ms: float  # stop a frame's generations once this much time is spent (ms)
-    window_position_mm: float  # search window: +- this around the predicted position (mm)...
-    window_growth_mm_s: float  # ...plus this much per second since the last measurement (mm/s)
-    window_heading_deg: float  # ... +- this around the predicted heading (deg)
-    window_tilt_deg: float  # ... +- this around the predicted tilt (deg)
-    window_alpha_frac: float  # ... alpha within a factor 1 +- this of the track's
-    lost_frames: int  # misses in a row before the track is declared lost
-    gain_position: float  # alpha-beta filter: position gain (0..1)
-    gain_velocity: float  # alpha-beta filter: velocity gain (0..1)
-    gain_alpha: float  # smoothing of the size ratio alpha (0..1)
-    size_tolerance: float  # re-acquisition: candidate alpha within this fraction of the track's
-    max_speed_mm_s: float  # a measured jump faster than this is a miss, not a move (mm/s)
-    water_z_mm: float  # water surface height in the base frame (mm); nan = unknown
-    plane_search: bool  # search only on the water plane (position on it, heading, alpha)
-    plane_margin_mm: float  # known water: a measured origin farther than this from the plane is a miss (mm)
-    max_tilt_deg: float  # known water: a measured normal farther than this from the vertical is a miss (deg)
-    min_visible: float  # share of S_in inside each image needed to measure; a prediction below: out_of_view
-    search_window_mm: float  # lost: the position window grows up to +- this across the view (mm)
-    acquire_generations: int  # whole-volume search: GA generations of it per camera frame
-
-    def validate(self, where: str) -> None:
-        w = f"{where}." if where else ""
-        for k in ("generations_per_frame", "lost_frames", "acquire_generations"):
-            if getattr(self, k) < 1:
-                raise InputError(f"config key '{w}{k}': must be >= 1, got {getattr(self, k)}")
-        for k in ("gain_position", "gain_velocity", "gain_alpha"):
-            if not 0.0 < getattr(self, k) <= 1.0:
-                raise InputError(f"config key '{w}{k}': must be in (0, 1], got {getattr(self, k)}")
-        if self.plane_search and not math.isfinite(self.water_z_mm):
-            raise InputError(f"config key '{w}plane_search': needs '{w}water_z_mm' (photoservo calibrate water)")
-        for k in ("time_budget_ms", "window_position_mm", "window_alpha_frac", "max_speed_mm_s", "search_window_mm"):
-            if getattr(self, k) <= 0:
-                raise InputError(f"config key '{w}{k}': must be > 0, got {getattr(self, k)}")
 
 
 @dataclass(frozen=True)
@@ -151,16 +123,6 @@ class TrackerConfig(Protocol):
     fitness: FitnessParams
 
 
-@dataclass
-class _Acquiring:
-    """A whole-volume search in progress (`estimator.acquisition`) and the frame it runs on."""
-
-    steps: Generator[int, None, Acquired]
-    frame: StereoHue
-    T_base_left: np.ndarray
-    t: float
-
-
 @dataclass(frozen=True)
 class _Measured:
     """A measurement: pose in the left camera of its frame and in the base frame, capture time (s)."""
@@ -183,7 +145,7 @@ class Tracker:
         self.ss = np.random.SeedSequence(seed)
         self.rng = np.random.default_rng(self.ss.spawn(1)[0])
         self.search: PoseSearch | None = None  # the tracking search (tracking, coasting, lost)
-        self.acquiring: _Acquiring | None = None  # the whole-volume search in progress
+        self.acquiring: Acquiring | None = None  # the whole-volume search in progress
         self.status: Status = "acquiring"
         self.misses = 0
         self.frames = 0
@@ -236,20 +198,28 @@ class Tracker:
             old = self.status == "lost" or t - self.motion.t_last > PAIRS_AFTER_S
             near, far = self._pairs(frame, T_left_base, t) if old else ([], False)
             m, best, n = self._measure_step(frame, T_base_left, T_left_base, T_new_old, t, gens, near)
-        if m is None and (self.search is None or far or self.acquiring is not None
-                          or (self.status == "lost" and t - self.motion.t_last > LOCAL_SEARCH_S)):
+        behind = (self.acquiring is not None and self.acquiring.taken is not None  # a provisional track's search
+                  and self.status in ("tracking", "coasting"))
+        if behind:
+            acq, n_acq = self._final_step(frame, left_bgr, right_bgr, T_base_left, t)
+            m = m if self.search is not None else None  # not dropped: this frame's measurement stands
+        elif m is None and (self.search is None or far or self.acquiring is not None
+                            or (self.status == "lost" and t - self.motion.t_last > LOCAL_SEARCH_S)):
             acq, n_acq = self._acquire_step(frame, left_bgr, right_bgr, T_base_left, t)
-            if acq is not None:  # found on the frame it started on: taken, then confirmed on this one
-                track_before = dataclasses.replace(self.motion), self.status
-                self._accept(acq)
-                self._restart_search(frame, T_left_base @ acq.T_base_model, acq.c.alpha)
-                if acq.t < t:
-                    m, best, n = self._confirm(frame, T_base_left, T_left_base, t, max_generations)
-                    if m is None:  # the creature moved on from where it was found: the track before stands
-                        acq, self.misses = None, self.p.lost_frames - 1
-                        self.motion, self.status = track_before
+        if acq is not None:  # found on the frame it started on: taken, then confirmed on this one
+            track_before = dataclasses.replace(self.motion), self.status
+            self._accept(acq)
+            self._restart_search(frame, T_left_base @ acq.T_base_model, acq.c.alpha)
+            if acq.t < t:
+                m, best, n = self._confirm(frame, T_base_left, T_left_base, t, max_generations)
+                if m is None:  # the creature moved on from where it was found: the track before stands
+                    acq, self.misses = None, self.p.lost_frames - 1
+                    self.motion, self.status = track_before
+                    if self.acquiring is not None:  # a provisional answer: the search goes on as before
+                        self.acquiring.taken = self.acquiring.before = None
         if m is not None:
-            self.acquiring = None
+            if self.acquiring is not None and self.acquiring.taken is None:
+                self.acquiring = None
             self._accept(m, restart=acq is not None)
         elif acq is None:
             self._miss(t, T_left_base)
@@ -331,7 +301,9 @@ class Tracker:
             self.search = None  # nothing to search around: the whole volume is searched
         elif not self._in_view(T_left_base @ T_pred):
             self.status = "out_of_view"  # the predicted creature left the view: never a pose
-            self.search = None  # the whole volume is searched for its return
+            self.search = None  # the whole volume is searched for its return, on a frame it is in
+            if self.acquiring is not None and self.acquiring.taken is not None:
+                self.acquiring = None  # (a search behind the track runs on a frame from before it left)
         elif self.search is not None and self.misses < self.p.lost_frames:
             self.status = "coasting"
         else:
@@ -342,32 +314,82 @@ class Tracker:
     def _acquire_step(self, frame: StereoHue, left_bgr: np.ndarray, right_bgr: np.ndarray,
                       T_base_left: np.ndarray, t: float) -> tuple[_Measured | None, int]:
         """This frame's share of the whole-volume search: starts one on this frame when none
-        runs and runs this frame's share of its GA generations (`_acquire_share`). Once it ends, its chosen
-        candidate (`_choose`) measured on the frame it started on, if it passes the tests.
-        Returns (measurement or None, generations run)."""
+        runs and runs this frame's share of its GA generations (`_acquire_share`). Its answer:
+        the chosen candidate (`_chosen`) measured on the frame it started on, if it passes the
+        tests: once its one island passed detection (provisional: the search goes on behind the
+        track, `_final_step`), or when it ends. Returns (measurement or None, generations run)."""
         if self.acquiring is None:
             seed = int(self.ss.spawn(1)[0].generate_state(1)[0])
+            early: list[tuple[Detection, Candidate]] = []
             steps = acquisition(self.model, left_bgr, right_bgr, self.rig, self.ga_params, self.est_params,
-                                self.fit_params, frame, seed, seeded_only=True)
-            self.acquiring = _Acquiring(steps, frame, T_base_left, t)
+                                self.fit_params, frame, seed, seeded_only=True, provisional=early)
+            self.acquiring = Acquiring(steps, frame, T_base_left, t, early)
         a = self.acquiring
         n = 0
         try:
-            while n < self.share:
+            while n < self.share and not (a.provisional and not a.tried):
                 n += next(a.steps)
         except StopIteration as end:
             self.acquiring = None
-            self.acquisitions += bool(end.value.islands)  # a search ran (a frame without blob pairs has none)
+            self.acquisitions += bool(end.value.islands) and a.taken is None  # a search ran (none without blob pairs)
+            return self._chosen(end.value.results, a, a.before), n
+        if a.provisional and not a.tried:  # its one island passed detection: taken before the refinements
+            a.tried = True
             T_pred = self.predict(a.t)
-            chosen = choose(end.value.results, a.T_base_left, self.motion.alpha,
-                            None if T_pred is None else T_pred[:3, 3],
-                            self.p.size_tolerance)
-            if chosen is not None:
-                d, c = chosen
-                self.threshold = d.threshold
-                if self._measurement(c, a.T_base_left, a.t, jump=False):
-                    return _Measured(c, a.T_base_left @ make_pose(c.R, c.position_mm), a.t, acquired=True), n
+            before = self.motion.alpha, None if T_pred is None else T_pred[:3, 3]
+            m = self._chosen(a.provisional, a)
+            if m is not None:
+                a.taken, a.before = m.c, before
+                self.acquisitions += 1
+            return m, n
         return None, n
+
+    def _final_step(self, frame: StereoHue, left_bgr: np.ndarray, right_bgr: np.ndarray,
+                    T_base_left: np.ndarray, t: float) -> tuple[_Measured | None, int]:
+        """The search behind a provisional track, a quarter of acquire_generations: when it ends,
+        its answer chosen as if the provisional never was (`Acquiring.before`). The same answer as
+        the provisional one (`same_answer`: the track's window; a turned or mirrored twin is not):
+        its detection threshold is the tracker's. Another answer, or none: the track is dropped
+        (no pose) and the answer, if any, is returned to restart the track from. Returns
+        (measurement or None, generations run)."""
+        a = self.acquiring
+        n = 0
+        try:
+            while n < max(1, self.p.acquire_generations // 4):
+                n += next(a.steps)
+        except StopIteration as end:
+            self.acquiring = None
+            chosen = choose(end.value.results, a.T_base_left, *a.before, self.p.size_tolerance)
+            p = self.p
+            if chosen is not None and same_answer(a.taken, chosen[1], p.window_position_mm, p.window_heading_deg,
+                                                  p.size_tolerance):
+                d, c = chosen
+                self.threshold, self.motion.alpha = d.threshold, c.alpha  # its size, and its refined pose seeded
+                if (T_pred := self.predict(t)) is not None and self.search is not None:
+                    T = invert_pose(T_base_left) @ make_pose(a.T_base_left[:3, :3] @ c.R, T_pred[:3, 3])
+                    self.search.seed(T[:3, :3], T[:3, 3], np.array([c.alpha]))
+                return None, n
+            self.motion.restart()  # the provisional track was not the search's answer: no pose from it
+            self.search, self.status = None, "acquiring"
+            return (None if chosen is None else self._chosen([chosen], a, a.before)), n
+        return None, n
+
+    def _chosen(self, results: list[tuple[Detection, Candidate]], a: Acquiring,
+                before: tuple[float | None, np.ndarray | None] | None = None) -> _Measured | None:
+        """The candidate of a whole-volume search's results (`choose`: with the track's alpha and
+        predicted position at the search's frame, or `before`) measured on the frame the search
+        ran on, if it passes the tests; its detection threshold becomes the tracker's."""
+        if before is None:
+            T_pred = self.predict(a.t)
+            before = self.motion.alpha, None if T_pred is None else T_pred[:3, 3]
+        chosen = choose(results, a.T_base_left, *before, self.p.size_tolerance)
+        if chosen is None:
+            return None
+        d, c = chosen
+        self.threshold = d.threshold
+        if not self._measurement(c, a.T_base_left, a.t, jump=False):
+            return None
+        return _Measured(c, a.T_base_left @ make_pose(c.R, c.position_mm), a.t, acquired=True)
 
     def _acquire_share(self, t: float) -> int:
         """The whole-volume search's GA generations for a frame captured at t (s): acquire_generations
