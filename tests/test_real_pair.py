@@ -275,3 +275,29 @@ def test_the_crate_at_0_6x_is_not_a_pose_pairing_two_parts_of_it():
     est = estimate(c.model, c.left, c.right, c.rig, CFG.ga, CFG.estimator, CFG.fitness, seed=5)
     assert est.found
     assert abs(est.position_mm[2] / c.truth["distance_mm"] - 1) < 0.05
+
+
+def test_onto_surface_slides_a_fit_to_the_depth_both_images_see(cases):
+    """`stereo_plane.onto_surface` on the half-size pair: the crate's true pose moved 10 % nearer
+    along its line of sight (alpha / 0.9: the same left image) is slid back to the crate's depth and
+    re-scored; a tolerance of 0 keeps it where it is when the slid pose scores lower."""
+    import dataclasses
+
+    from photoservo.vision.estimator import search_frame
+    from photoservo.vision.pose_search import Candidate, PoseSearch
+    from photoservo.vision.stereo_plane import onto_surface
+
+    c = next(c for c in cases if (c.target, c.variant) == ("crate", "left"))
+    frame = search_frame(stereo_hue(c.left, c.right, CFG.fitness), c.model, c.left, c.right, CFG.estimator)
+    search = PoseSearch(c.model, c.rig, frame, CFG.ga, CFG.estimator, CFG.fitness, np.random.default_rng(0))
+    t, a = 0.9 * np.array(c.truth["position_mm"]), c.truth["alpha_px_per_mm"] / 0.9
+    f0 = float(fitness(np.eye(3)[None], t[None], np.array([a]), c.model, frame, c.rig, CFG.fitness)[0])
+    near = Candidate(R=np.eye(3), position_mm=t, alpha=a, fitness=f0, generations=0, source="blob 0")
+    slid = onto_surface(near, search, c.left, c.right, tol=1.0)
+    assert abs(slid.position_mm[2] / c.truth["distance_mm"] - 1) < 0.04, slid.position_mm
+    assert abs(slid.alpha * slid.position_mm[2] / (a * t[2]) - 1) < 1e-9  # the same left image
+    f1 = float(fitness(np.eye(3)[None], slid.position_mm[None], np.array([slid.alpha]), c.model, frame, c.rig,
+                       CFG.fitness)[0])
+    assert slid.fitness == f1
+    kept = onto_surface(dataclasses.replace(near, fitness=f1 + 0.5), search, c.left, c.right, tol=0.0)
+    assert kept.position_mm[2] == t[2]

@@ -19,10 +19,10 @@ from photoservo.vision.contour import StereoChroma
 from photoservo.vision.detection import Detection, detect
 from photoservo.vision.fitness import StereoHue, point_weight
 from photoservo.vision.parts import absent_parts
-from photoservo.vision.photo_model import HUE_BINS, PhotoModel
+from photoservo.vision.photo_model import PhotoModel
 from photoservo.vision.pose_search import Candidate, PoseSearch
 from photoservo.vision.rig import Rig
-from photoservo.vision.stereo_plane import pairs_other_surfaces
+from photoservo.vision.stereo_plane import on_target_hue, onto_surface, pairs_other_surfaces
 
 if TYPE_CHECKING:
     from photoservo.vision.estimator import EstimatorParams
@@ -59,7 +59,8 @@ def refined(search: PoseSearch, c: Candidate, frame: StereoHue, left_bgr: np.nda
             p: EstimatorParams) -> Generator[int, None, Candidate]:
     """The leading island's refinements, one generation per step: where the contour rule scores, the
     grown fits (`PoseSearch.grown_steps`: its narrow peak); the look-alike twins (mirror, heading + 180
-    deg); the tilt from the stereo plane; the per-axis size."""
+    deg); the tilt from the stereo plane; the per-axis size; where the contour rule scores, the depth
+    both images see under the fit (`stereo_plane.onto_surface`)."""
     if frame.chroma is not None and p.contour_grow > 1.0:
         # a grown fit must win by more than the fitness' resolution: on a small photo-model (the real pair's
         # crate at 0.6x, 115 points) fits 12-30 % too large score alike within a point of the narrow peak
@@ -74,6 +75,8 @@ def refined(search: PoseSearch, c: Candidate, frame: StereoHue, left_bgr: np.nda
         if k.fitness >= c.fitness + p.aspect_min_gain:
             c = k
         yield search.ga.generation - g0
+    if frame.chroma is not None and np.isfinite(c.fitness):  # hues everywhere: the depth both images see under it
+        c = onto_surface(c, search, left_bgr, right_bgr, p.plane_fitness_tol)
     return c
 
 
@@ -172,10 +175,9 @@ def same_surface_first(results: list[tuple[Detection, Candidate]], model: PhotoM
                        grey_frame: StereoGrey, passed_ratio: float) -> list[tuple[Detection, Candidate]]:
     """The candidates `ranked`, after the others those whose two images lie on two surfaces (stereo_plane.
     pairs_other_surfaces: a region of the target's hues wider than the model pairs at a wrong depth too)."""
-    on_target = np.zeros(256, bool)
-    on_target[:HUE_BINS] = np.asarray(model.target_hues, bool)
+    on_target = on_target_hue(model, frame.left)
     off = [pairs_other_surfaces(c.R_model, c.position_mm, c.alpha, model, grey_frame.left, grey_frame.right, rig,
-                                on_target=on_target[frame.left]) for _, c in results]
+                                on_target=on_target) for _, c in results]
     return (ranked([r for r, o in zip(results, off) if not o], passed_ratio)
             + ranked([r for r, o in zip(results, off) if o], passed_ratio))
 

@@ -13,14 +13,17 @@ model normal is the plane's, the least turn, and slides the origin along its ray
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
+from typing import Any
 
 import cv2
 import numpy as np
 
-from photoservo.vision.photo_model import PhotoModel
+from photoservo.vision.fitness import fitness
+from photoservo.vision.photo_model import HUE_BINS, PhotoModel
 from photoservo.vision.rig import Rig, project_points
-from photoservo.vision.sampling import patches
+from photoservo.vision.sampling import grey, patches
 
 
 @dataclass(frozen=True)
@@ -96,6 +99,30 @@ def pairs_other_surfaces(R: np.ndarray, t: np.ndarray, alpha: float, model: Phot
     it (`stereo_depth_ratio`); False without evidence (too few textured points match)."""
     r = stereo_depth_ratio(R, t, alpha, model, left_grey, right_grey, rig, on_target=on_target)
     return bool(np.isfinite(r) and abs(np.log(r)) > np.log(STEREO_DEPTH_TOL))
+
+
+def on_target_hue(model: PhotoModel, hue: np.ndarray) -> np.ndarray:
+    """Bool image: True where the hue image (`photo_model.hue_image`) holds one of the model's target hues."""
+    lut = np.zeros(256, bool)
+    lut[:HUE_BINS] = np.asarray(model.target_hues, bool)
+    return lut[hue]
+
+
+def onto_surface(c: Any, search: Any, left_bgr: np.ndarray, right_bgr: np.ndarray, tol: float) -> Any:
+    """The candidate `c` (`pose_search.Candidate` of the PoseSearch `search`) slid along the line of
+    sight of its origin onto the depth where both images put the surface under it (`stereo_depth_ratio`
+    r: position r·t, alpha / r, the same left image), re-scored, and kept when its fitness is at most
+    `tol` below c's: the hue fitness' depth comes from its points' parallax alone, which on a surface of
+    one hue wider than the model is loose (the real pair over 12 seeds: 5-11 % off in depth in 9 of 108
+    runs, 0-4.7 % at the depth both images see). `c` as it is without evidence, or r beyond STEREO_DEPTH_TOL."""
+    r = stereo_depth_ratio(c.R_model, c.position_mm, c.alpha, search.model, grey(left_bgr), grey(right_bgr),
+                           search.rig, on_target=on_target_hue(search.model, search.frame.left))
+    if not np.isfinite(r) or abs(np.log(r)) > np.log(STEREO_DEPTH_TOL) or r == 1.0:
+        return c
+    t, alpha = r * np.asarray(c.position_mm), c.alpha / r
+    f = float(fitness(c.R_model[None], t[None], np.array([alpha]), search.model, search.frame, search.rig,
+                      search.fit_params)[0])
+    return dataclasses.replace(c, position_mm=t, alpha=alpha, fitness=f) if f >= c.fitness - tol else c
 
 
 def _ray_matches(R: np.ndarray, t: np.ndarray, alpha: float, model: PhotoModel, left_grey: np.ndarray,
