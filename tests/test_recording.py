@@ -377,6 +377,18 @@ def test_comparison_table_against_hand_computed_numbers(tmp_path: Path):
     assert text.splitlines()[2].split()[-3:] == ["4", "3", "-1"]   # frames row
 
 
+def test_mean_fitness_leaves_out_frames_searched_in_vain(tmp_path: Path):
+    # the tracker logs fitness -inf on a frame where its search found nothing: the mean is over
+    # the frames that have a fitness (replay printed "mean fitness -inf" for any run with a miss)
+    path = tmp_path / "m.rrd"
+    with Recorder.open(path, "track") as rec:
+        for k, (found, fit) in enumerate([(True, 0.8), (False, -math.inf), (True, 0.6)]):
+            rec.log_frame(k, 0.04 * k, *frame_pair(k))
+            rec.log_estimate(k, 0.04 * k, found=found, fitness=fit)
+    m = run_metrics(read_recording(path))
+    assert m["mean_fitness"] == pytest.approx(0.7) and m["found_ratio"] == pytest.approx(2 / 3)
+
+
 def test_bad_inputs_are_one_line_errors(tmp_path: Path):
     with pytest.raises(InputError, match="mode 'tiff'"):
         Recorder.open(tmp_path / "x.rrd", "track", mode="tiff")

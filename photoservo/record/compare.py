@@ -34,7 +34,8 @@ def run_metrics(rec: Recording) -> dict[str, float]:
     (hold error, track error, jitter, commanded motion) are defined in servo/scores.py:
 
     frames            frames logged
-    mean_fitness      mean fitness over all estimates that have one
+    mean_fitness      mean fitness over all estimates that have a finite one (a frame the tracker
+                      searched and found nothing on logs -inf)
     found_ratio       estimates with found / estimates
     lost_frames       estimates with found = false
     jitter_mm         jitter of the estimated position (base frame when the camera pose was
@@ -58,7 +59,7 @@ def run_metrics(rec: Recording) -> dict[str, float]:
     est = rec.estimates
     found = [e for e in est if e.found and e.T_base_model() is not None]
     m: dict[str, float] = {"frames": float(len(rec.frames))}
-    fits = [e.fitness for e in est if e.fitness is not None]
+    fits = [e.fitness for e in est if e.fitness is not None and math.isfinite(e.fitness)]
     m["mean_fitness"] = float(np.mean(fits)) if fits else nan
     m["found_ratio"] = len([e for e in est if e.found]) / len(est) if est else nan
     m["lost_frames"] = float(len([e for e in est if not e.found])) if est else nan
