@@ -69,14 +69,22 @@ def refined(search: PoseSearch, c: Candidate, frame: StereoHue, left_bgr: np.nda
     c = yield from search.twin_steps(c)
     if p.plane_refine and np.isfinite(c.fitness):
         c = yield from search.tilt_steps(c, left_bgr, right_bgr)
+    c = yield from aspect_refined(search, c, p)
+    if frame.chroma is not None and np.isfinite(c.fitness):  # hues everywhere: the depth both images see under it
+        c = onto_surface(c, search, left_bgr, right_bgr, p.plane_fitness_tol)
+    return c
+
+
+def aspect_refined(search: PoseSearch, c: Candidate, p: EstimatorParams) -> Generator[int, None, Candidate]:
+    """`c` re-fitted per photo axis (`PoseSearch.refine_aspect`, alpha_x / alpha_y within a factor
+    `aspect_max`), kept when it fits at least `aspect_min_gain` better; one step (its generations).
+    `c` as it is when the per-axis size is off or c has no fitness."""
     if p.aspect_max > 1.0 and np.isfinite(c.fitness):
         g0 = search.ga.generation
         k = search.refine_aspect(c, p.aspect_max)
         if k.fitness >= c.fitness + p.aspect_min_gain:
             c = k
         yield search.ga.generation - g0
-    if frame.chroma is not None and np.isfinite(c.fitness):  # hues everywhere: the depth both images see under it
-        c = onto_surface(c, search, left_bgr, right_bgr, p.plane_fitness_tol)
     return c
 
 
@@ -124,12 +132,7 @@ def appearance_twin(first: tuple[Detection, Candidate], search: PoseSearch, grey
             break
     else:
         return first
-    if p.aspect_max > 1.0:
-        g0 = search.ga.generation
-        k = search.refine_aspect(twin, p.aspect_max)
-        if k.fitness >= twin.fitness + p.aspect_min_gain:
-            twin = k
-        yield search.ga.generation - g0
+    twin = yield from aspect_refined(search, twin, p)
     d_t = detect(twin, model, frame, rig, search.fit_params, p, seed=seed, grey_frame=grey_frame,
                  value_frame=value_frame, parts=parts, chroma=chroma, weight=weight)
     if d.passed and not d_t.passed:
