@@ -138,7 +138,7 @@ def print_tables(rows: list[dict]) -> None:
         print(f"{r['target']:<7} {r['variant']:<7} {'yes' if r['found'] else 'no':>5} {'yes' if r['right_object'] else 'no':>5} "
               f"{r['depth_pct']:8.1f} {r['lateral_pct']:7.1f} {r['size_pct']:7.1f} {r['fitness'] or 0:7.3f} "
               f"{r['fitness_truth']:7.3f} {r['null_p99']:8.3f} {r['seconds']:6.2f} {r['cpu_seconds']:6.2f}")
-    print(f"\nthe GA alone in a window around the truth (position +-10 % of depth, tilt +-30 deg, alpha x(1 +- 0.5)):")
+    print("\nthe GA alone in a window around the truth (position +-10 % of depth, tilt +-30 deg, alpha x(1 +- 0.5)):")
     print(f"{'target':<7} {'variant':<7} {'right':>5} {'depth %':>8} {'lat. %':>7} {'size %':>7} {'fitness':>7} {'truth f':>7}")
     for r in rows:
         print(f"{r['target']:<7} {r['variant']:<7} {'yes' if r['window_right_object'] else 'no':>5} "

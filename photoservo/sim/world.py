@@ -114,8 +114,7 @@ class TargetMotion:
 
     def pose(self, t: float) -> np.ndarray:
         """T_base_model(t): the target's model frame in the base frame at time t (s)."""
-        w_h, w_r, w_p = (2 * math.pi / self.heave_period, 2 * math.pi / self.roll_period,
-                         2 * math.pi / self.pitch_period)
+        w_r, w_p = 2 * math.pi / self.roll_period, 2 * math.pi / self.pitch_period
         R = (axis_rotation(2, self.heading) @ axis_rotation(0, self.roll * math.sin(w_r * t))
              @ axis_rotation(1, self.pitch * math.sin(w_p * t + 1.0)) @ FACE_UP)
         T = np.eye(4)

@@ -4,7 +4,6 @@ from the cameras and the arm."""
 from __future__ import annotations
 
 import argparse
-import csv
 import time
 from collections.abc import Callable
 from pathlib import Path
