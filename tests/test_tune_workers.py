@@ -41,6 +41,13 @@ def _trials(storage: str, study: str) -> list:
         return []
 
 
+def _wait_for(ready, proc: subprocess.Popen, timeout: float = 300.0) -> None:
+    """Poll `ready()` until true, the process has ended, or `timeout` s have passed."""
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline and proc.poll() is None and not ready():
+        time.sleep(0.05)
+
+
 def _pg_bin() -> Path | None:
     """The PostgreSQL server binaries: on PATH, or Debian's /usr/lib/postgresql/<v>/bin."""
     found = shutil.which("initdb")
@@ -93,8 +100,19 @@ def test_two_workers_share_a_postgresql_study(postgres: str):
     and both workers ran trials."""
     common = [*TINY, "--worlds", "1", "--trials", "4", "--storage", postgres, "--study", "pg"]
     first = _tune(*common, "--seed", "0")
-    time.sleep(3.0)   # the first node creates the study; the second joins it
-    second = _tune(*common, "--seed", "1")
+    # The first node creates the study and starts running its first trial; it is held there
+    # (SIGSTOP, well within the storage's 60 s heartbeat grace) until the second node has joined
+    # and started one of its own, then released. Without the hold the first node could use the
+    # whole budget while the second was still starting (imports, compiled kernels): it did in CI.
+    _wait_for(lambda: any(t.user_attrs.get("worker") for t in _trials(postgres, "pg")), first)   # in its run
+    first.send_signal(signal.SIGSTOP)
+    try:
+        second = _tune(*common, "--seed", "1")
+        second_name = f"{socket.gethostname()}:{second.pid}"
+        _wait_for(lambda: any(t.user_attrs.get("worker") == second_name for t in _trials(postgres, "pg")),
+                  second, timeout=45.0)
+    finally:
+        first.send_signal(signal.SIGCONT)
     outs = [p.communicate(timeout=600) for p in (first, second)]
     assert first.returncode == 0 and second.returncode == 0, [o[1][-2000:] for o in outs]
     trials = _trials(postgres, "pg")
