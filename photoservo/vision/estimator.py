@@ -11,7 +11,9 @@ searches the whole volume. Every island stops when converged (`Convergence`); ea
 is a candidate, tested by `detect` (`Detection`: the fitness with the cameras combined by their
 minimum — both must see it — against the pair's own null, the outline check: few outer points
 on target hue, and the parts check). An island whose fit has parts absent and lies near the best
-island's tries its head-to-tail twin (`candidates.turned_islands`); the island leading by fitness
+island's tries its head-to-tail twin (`candidates.turned_islands`); where hue bounds the target, the
+other islands near the best with their parts in place are turned onto the plane both images see
+(`candidates.stereo_islands`); the island leading by fitness
 is refined (its look-alike twins: planar-ambiguity mirror, heading + 180 deg; the stereo plane's
 tilt; the per-axis size). The candidate that stands out most from what a search of this pair
 finds elsewhere at its scale (`Detection.standing`) is the estimate, the others the candidate
@@ -20,7 +22,8 @@ while the creature itself stands out more: then the creature is the estimate, or
 unless it fails and one that passes stands nearly as high (`candidates.ranked`). When the first
 still fails after its head-to-tail twin was tried, each candidate that fails its outline test
 alone is tried grown (`candidates.grown_outlines`: a fit shrunk inside the creature spills onto
-the creature itself).
+the creature itself). Where hue bounds the target, a first candidate that passes is searched again at
+the depth both images see under it (`candidates.stereo_depth`).
 
 When the target's hues cover most of the pair (a many-hued creature in water of one of its hues;
 a real scene whose background lies within the hue tolerance of the target), seeds come from the
@@ -41,7 +44,7 @@ import numpy as np
 from photoservo.errors import InputError
 from photoservo.vision.appearance import stereo_grey, stereo_value
 from photoservo.vision.candidates import (appearance_twin, grown_outlines, ranked, refined, same_surface_first,
-                                          turned_islands)
+                                          stereo_depth, stereo_islands, turned_islands)
 from photoservo.vision.contour import stereo_chroma
 from photoservo.vision.detection import Detection, detect
 from photoservo.vision.fitness import FitnessParams, StereoHue, stereo_hue
@@ -278,6 +281,8 @@ def acquisition(model: PhotoModel, left_bgr: np.ndarray, right_bgr: np.ndarray, 
         firsts.append((yield from search.steps()))
     parts = model_parts(model.inner_uv)
     yield from turned_islands(firsts, islands, streams, parts, p)
+    if frame.chroma is None:  # where hue bounds the target: the islands near the lead on their stereo planes
+        yield from stereo_islands(firsts, islands, ss.spawn(len(islands)), left_bgr, right_bgr, parts, p)
     # what every candidate's detection reads of the pair, computed once per acquisition
     looks = dict(grey_frame=stereo_grey(left_bgr, right_bgr), value_frame=stereo_value(left_bgr, right_bgr),
                  parts=parts, chroma=frame.chroma or stereo_chroma(left_bgr, right_bgr),
@@ -303,6 +308,9 @@ def acquisition(model: PhotoModel, left_bgr: np.ndarray, right_bgr: np.ndarray, 
                                                 looks["parts"], looks["chroma"], looks["weight"])
     if p.outline_grow > 1.0 and results and not results[0][0].passed:  # after the twin: it draws from the islands' rng
         results = yield from grown_outlines(results, dict(islands), looks, p, seed)
+    if frame.chroma is None and results:  # where hue bounds the target: the answer at the depth both images see
+        results[0] = yield from stereo_depth(results[0], dict(islands)[results[0][1].source], left_bgr, right_bgr,
+                                             ss.spawn(1)[0], looks, p, seed)
     return Acquired(results, islands)
 
 

@@ -465,17 +465,15 @@ class PoseSearch:
                                         tilt_deg=tilt_deg, alpha_frac=alpha_frac, rng=rng)
         return dataclasses.replace(c, source=best.source)
 
-    def refine_tilt(self, best: Candidate, left_bgr: np.ndarray, right_bgr: np.ndarray) -> Candidate:
-        """Tilt from the disparity gradient (`vision/stereo_plane.py`): fit the target's plane
-        from stereo over the inner points that land on target hue, turn the pose onto it, re-fit
-        position, heading and scale by a short GA with the tilt held within 1.5 deg, and keep the
-        result when its fitness is at most `plane_fitness_tol` below `best` (the hue fitness
-        vetoes a plane fitted to the wrong thing)."""
-        return drive(self.tilt_steps(best, left_bgr, right_bgr))
-
-    def tilt_steps(self, best: Candidate, left_bgr: np.ndarray,
-                   right_bgr: np.ndarray) -> Generator[int, None, Candidate]:
-        """`refine_tilt` one generation per step (see `steps`)."""
+    def tilt_steps(self, best: Candidate, left_bgr: np.ndarray, right_bgr: np.ndarray, follow: bool = False,
+                   rng: np.random.Generator | None = None) -> Generator[int, None, Candidate]:
+        """Tilt from the disparity gradient (`vision/stereo_plane.py`), one generation per step (see
+        `steps`): fit the target's plane from stereo over the inner points that land on target hue, turn
+        the pose onto it (by theta), re-fit position, heading and scale by a short GA with the tilt held
+        within 1.5 deg, and keep the result when its fitness is at most `plane_fitness_tol` below `best`
+        (the hue fitness vetoes a plane fitted to the wrong thing); position +- 2 % of the depth, heading +- 5
+        deg, alpha +- 5 %, with `follow` +- max(2 %, theta / 10), max(5 deg, theta), max(5 %, theta / 2): a fit
+        tilted too little fits with heading and scale off (renderer 1019). `rng`: see `local_steps`."""
         lut = np.zeros(256, bool)
         lut[:HUE_BINS] = np.asarray(self.model.target_hues, bool)
         plane = fit_target_plane(best.R, best.position_mm, best.alpha, self.model, grey(left_bgr),
@@ -483,8 +481,10 @@ class PoseSearch:
         if plane is None:
             return best
         R2, t2 = align_to_plane(best.R, best.position_mm, plane)
-        c = yield from self.local_steps(R2, t2, best.alpha, position_frac=0.02, heading_deg=5.0, tilt_deg=1.5,
-                                        alpha_frac=0.05)
+        theta = math.acos(float(np.clip(best.R[:, 2] @ R2[:, 2], -1.0, 1.0))) if follow else 0.0
+        c = yield from self.local_steps(R2, t2, best.alpha, position_frac=max(0.02, theta / 10),
+                                        heading_deg=max(5.0, math.degrees(theta)), tilt_deg=1.5,
+                                        alpha_frac=max(0.05, theta / 2), rng=rng)
         if c.fitness >= best.fitness - self.est_params.plane_fitness_tol:
             return Candidate(c.R, c.position_mm, c.alpha, c.fitness, self.ga.generation, best.source)
         return best
