@@ -214,8 +214,10 @@ def _collection(s: dict, cfg, status: _StatusLine) -> str:
             f"(last phase: {status.phase or 'none'}; a longer --duration, or [servo] hold_* keys)")
 
 
-def _report(args, sc, rec, cfg, status) -> int:
+def _report(args, sc, rec, cfg, status, bridge: dict | None = None) -> int:
     s = sc.summary()
+    if bridge:  # the simulator's emulated bridge: setpoints taken, refused (by reason), watchdog stops
+        s["bridge"] = bridge
     if getattr(args, "temporary_record", False):
         rec = None
     if rec is not None and rec.written:
@@ -239,6 +241,9 @@ def _report(args, sc, rec, cfg, status) -> int:
             print(f"track error vs truth (fully in view): median {_num(e['median'], '.1f')}, p95 "
                   f"{_num(e['p95'], '.1f')} mm; false tracks {s['false_tracks']}; re-acquisitions "
                   f"[{', '.join(_num(x, '.2f') for x in s['reacquisition_s'])}] s")
+        if bridge:
+            print(f"emulated bridge: {bridge.get('watchdog_stops', 0)} watchdog stops, "
+                  f"{bridge.get('refused', 0)} setpoints refused of {bridge.get('refused', 0) + bridge.get('accepted', 0)}")
         print("median ms: " + ", ".join(f"{k} {v:.1f}" for k, v in t.items()))
         for f in s["faults"]:
             print(f"fault: {f}")
@@ -300,6 +305,8 @@ def _run_sim(args, cfg) -> int:
                                     say=_say)
         finally:
             emu.stop()
+            m = emu.summary  # what the bridge did with the setpoints, for the summary
+            held["bridge"] = {k: m[k] for k in ("accepted", "refused", "refusals", "watchdog_stops") if k in m}
             if rec is not None:  # what the emulated bridge saw: the stop and servo off, in order
                 rec.event(rec.last_t, f"emulated bridge: {emu.summary.get('end', 'no report')}")
     return _finish(args, cfg, status, session)
@@ -326,7 +333,7 @@ def _finish(args, cfg, status: _StatusLine, session) -> int:
     rec = held.get("rec")
     if stop is not None:
         return report_stop("track", stop, _stopped(args, rec))
-    return _report(args, sc, rec, cfg, status)
+    return _report(args, sc, rec, cfg, status, held.get("bridge"))
 
 
 def _stopped(args, rec) -> str:

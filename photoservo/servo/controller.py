@@ -123,8 +123,12 @@ class Controller:
         self.phase = phase
         self.events.append((t, phase_event(phase, why)))
 
-    def step(self, now: float, q: np.ndarray, dq: np.ndarray, track: Track | None) -> ControlInfo:
+    def step(self, now: float, q: np.ndarray, dq: np.ndarray, track: Track | None,
+             t_state: float | None = None) -> ControlInfo:
+        """One control period at `now` (s) on the measured joints q (rad), dq (rad/s), measured
+        at t_state (s; None: now), toward the tracker's latest `track`."""
         p = self.params
+        self.motion.state_age_s = 0.0 if t_state is None else max(0.0, now - t_state)
         dt = self.motion.dt
         T_base_flange = pa10.fk(q)
         T_base_cam = T_base_flange @ self.T_flange_left

@@ -181,6 +181,8 @@ class Motion:
         self._override = params.speed_override_pct / 100.0
         self._last: Setpoint | None = None
         self._history: deque[np.ndarray] = deque(maxlen=max(1, round(params.track_window_s * params.rate_hz)))
+        #: how old the measured state given to the next step is (s), set by the caller (0: now)
+        self.state_age_s = 0.0
         self._target: np.ndarray | None = None
         self._refused: str = ""
         self._time_scale = 1.0
@@ -346,11 +348,18 @@ class Motion:
     def _seed(self, q_meas, dq_meas) -> tuple[np.ndarray, np.ndarray, str]:
         """The state a step starts from: the last setpoint while the measured joints are within
         track_tolerance_deg of one of the setpoints of the last track_window_s (the arm follows,
-        its report is just late), else the measured state, with a note saying why."""
+        its report is just late), else the measured state, with a note saying why. A measured
+        state older than track_window_s (`state_age_s`: the reports stopped coming a while, e.g.
+        the simulator's bridge stalled in its pty) tells nothing of whether the arm follows: the
+        plan goes on. (Re-planned from such a state, the setpoints jumped back by the distance
+        travelled since: the bridge refused them, and its watchdog stopped the arm; a bridge
+        that stays silent is the link's `silence_timeout_s` error.)"""
         q_meas, dq_meas = np.asarray(q_meas, float), np.asarray(dq_meas, float)
         tol = math.radians(self.params.track_tolerance_deg)
         if self._last is None or tol == 0:
             return q_meas, dq_meas, ""
+        if self.state_age_s > self.params.track_window_s:
+            return self._last.q, self._last.dq, ""
         off = np.max(np.abs(np.array(self._history) - q_meas), axis=1)
         if off.min() <= tol:
             return self._last.q, self._last.dq, ""

@@ -163,7 +163,7 @@ def control_tick(c: ControlLoop, now: float, t_state: float, q: np.ndarray, dq: 
     look-alike's distance scored against the truth, the phase events kept for the hold score
     (session time). Returns the period's `Tick`."""
     ctrl = c.ctrl
-    info = ctrl.step(now, q, dq, track)
+    info = ctrl.step(now, q, dq, track, t_state)
     if c.arm is not None:
         c.arm.send_setpoint(info.setpoint.q, info.setpoint.dq, now)
         if info.tool != c.tool:

@@ -189,27 +189,41 @@ class Emulator(Bridge):
         p = self.params
         self._T = 1.0 / p.control_hz
         self._state_every = max(1, round(p.control_hz / p.state_hz))
-        self._rx_pace, self._tx_pace = Pacer(p.baud), Pacer(p.baud)
+        # the host's bytes: what the line carried while this thread could not read (the pty
+        # holds them) is read at once when it can, up to a brake timeout's worth (see _receive)
+        self._rx_pace = Pacer(p.baud, burst=max(256, round(p.baud / 10.0 * p.brake_after_s)))
+        self._tx_pace = Pacer(p.baud)
+        self._t_rx = 0.0  # when the last frame from the host came off the line (bridge clock)
         self._tx_buf = bytearray()
         self._tx_full = False  # the last write found the pty full (a host not reading: wait, do not poll)
         self._next_tick = time.monotonic() + self._T
         self._n_tick = 0
+        self._report_due = False  # ticks ran since the last state report, one of them a state period's
         self._frame_len = len(P.encode(self.model.report(), 0))
         self._fd = self._master  # the pty as the loop started (stop() closes it after the loop)
         while not self._stop.is_set():
             now = time.monotonic()
             silent = self._silent.is_set()
-            rx_throttled = False if silent else self._receive(now)
-            if now >= self._next_tick:
+            rx_throttled = False if silent else self._receive(now, silent)
+            if now >= self._next_tick or self._report_due:
                 self._tick(now, silent)
             self._transmit(now, silent)
             self._wait(rx_throttled, silent)
 
-    def _receive(self, now: float) -> bool:
+    def _receive(self, now: float, silent: bool = False) -> bool:
         """Read only what the line could have carried (the rest stays in the pty), through the
-        fault injector, into the model. True when the line's rate limited the read."""
+        fault injector, into the model. True when the line's rate limited the read.
+
+        Each frame is handled when it came off the line (`_arrival`), after the control ticks
+        due before then: when this thread could not read for a while (its process not
+        scheduled, or blocked in the pty's read, which waits for the kernel's non-real-time
+        worker that moves the host's bytes across), the setpoints the host sent meanwhile are
+        taken in their order and at their times, as the bridge it stands for would have taken
+        them, instead of all at once at the end (where the ticks before them saw a silent host:
+        the watchdog's stop, and the arm behind the host's plan, which re-planned into refusals)."""
         n = self._rx_pace.allow(now)
         throttled = False
+        t_read = now
         if n > 0:
             try:
                 data = os.read(self._fd, n)
@@ -219,27 +233,48 @@ class Emulator(Bridge):
                 if e.errno != errno.EIO:  # EIO: nobody has the slave open (not possible: we hold it)
                     raise
                 data = b""
+            t_read = time.monotonic()  # a read may have waited for the pty: the bytes were there by now
             self._rx_pace.spend(len(data))
             throttled = self._rx_pace.rate > 0 and len(data) == n
-            self.rx_faults.push(data, now)
-        got = self.rx_faults.pop(now)
+            self.rx_faults.push(data, t_read)
+        got = self.rx_faults.pop(t_read)
         if got:
+            for frame in self.decoder.iter_feed(got):
+                t = self._arrival(frame, t_read)
+                if t >= self._next_tick:
+                    self._tick(t, silent, report=False)
+                with self._lock:
+                    for reply in self.model.handle(frame, t):
+                        self._send(reply, t)
             with self._lock:
-                for frame in self.decoder.iter_feed(got):
-                    for reply in self.model.handle(frame, now):
-                        self._send(reply, now)
                 self.model.rx_crc_errors = self.decoder.errors
         return throttled
 
-    def _tick(self, now: float, silent: bool) -> None:
-        """The control ticks of the model due by `now` (each published through on_tick); every
-        state period a state report, unless the line is still busy with the last one.
+    def _arrival(self, frame: P.Frame, t_read: float) -> float:
+        """When a frame read at t_read came off the line (bridge clock): a setpoint at the host's
+        stamp (the host and this emulator share the machine's monotonic clock), other frames at
+        t_read; never before the frame before it or the last tick run (that tick went without
+        it), never after t_read. So only the ticks this thread could not run in time see the
+        host's stamps: a host that stalled left a gap in them (the watchdog fires there), a
+        stamp from the future counts as t_read, an old one as the last tick. With injected line
+        faults (`rx_faults` active: stalls) every frame counts as read when released."""
+        t = t_read
+        if isinstance(frame.msg, P.JointSetpoint) and not self.rx_faults.active:
+            t = min(t_read, max(frame.msg.t_host_us * 1e-6, self._t_rx, self.model.t_tick))
+        self._t_rx = t
+        return t
+
+    def _tick(self, now: float, silent: bool, report: bool = True) -> None:
+        """The control ticks of the model due by `now` (each published through on_tick); then,
+        when `report` and a state period ended among the ticks run since the last report, a state
+        report, unless the line is still busy with the last one (`_receive` runs the ticks due
+        before each frame it takes without one: the loop's call after it reports).
 
         When this thread fell behind (the simulator's process was not scheduled), the missed
         ticks still move the arm: a real arm does not pause while its bridge's emulator waits for
-        the CPU. They run back to back on the setpoint the host has sent meanwhile (read just
-        before), and one state report follows, not a burst. Only a stall longer than the brake
-        timeout is skipped (counted in tick_overruns)."""
+        the CPU. They run back to back, each on the setpoint the host had sent by its time
+        (`_receive`), and one state report follows, not a burst. Only a stall longer than the
+        brake timeout is skipped (counted in tick_overruns)."""
         T = self._T
         with self._lock:
             m = self.model
@@ -247,24 +282,25 @@ class Emulator(Bridge):
             if behind > self.params.brake_after_s / T:
                 self.tick_overruns += 1
                 self._next_tick += behind * T
-            elif behind > 0:
-                for _ in range(behind):
-                    m.tick(self._next_tick)
-                    if self.on_tick is not None:
-                        self.on_tick(self._next_tick, m.q, m.dq, int(m.status()), int(m.fault))
-                    self._next_tick += T
-                self._n_tick += behind
-            m.tick(self._next_tick)
-            if self.on_tick is not None:
-                self.on_tick(self._next_tick, m.q, m.dq, int(m.status()), int(m.fault))
-            self._n_tick += 1
-            if (self._n_tick % self._state_every == 0 or behind > 0) and not silent:
-                if len(self._tx_buf) + self.tx_faults.queued_bytes() > self._frame_len:
+            n = 0
+            while self._next_tick <= now:
+                m.tick(self._next_tick)
+                if self.on_tick is not None:
+                    self.on_tick(self._next_tick, m.q, m.dq, int(m.status()), int(m.fault))
+                self._next_tick += T
+                self._n_tick += 1
+                n += 1
+                self._report_due = self._report_due or self._n_tick % self._state_every == 0
+            self._report_due = self._report_due or n > 1  # late: report at once
+            if report and self._report_due:
+                self._report_due = False
+                if silent:
+                    pass
+                elif len(self._tx_buf) + self.tx_faults.queued_bytes() > self._frame_len:
                     self.states_skipped += 1
                 else:
                     self._send(m.report(), now)
                     self.states_sent += 1
-        self._next_tick += T
 
     def _transmit(self, now: float, silent: bool) -> None:
         """Write what the line can carry now of the queued replies and reports."""
