@@ -272,3 +272,50 @@ def test_a_first_answer_failing_its_confirmation_leaves_the_tracker_acquiring(si
     monkeypatch.undo()
     tracks = _run(tr, cfg, s, 12 / 30, 12)
     assert tracks[-1].status == "tracking" and _err(tracks[-1], s, 23 / 30) < 15.0
+
+
+def test_coasting_ends_after_coast_max_s_at_a_low_frame_rate(sim):
+    """Under load the loop runs at 3-4 fps: lost_frames misses were 2.5-3 s of coasting on a
+    prediction. Coasting also ends coast_max_s after the last measurement."""
+    cfg, s = sim
+    tr = _tracker(cfg, s)
+    tracks = _run(tr, cfg, s, 0.0, 8)
+    assert tracks[-1].status == "tracking"
+    assert cfg.tracker.lost_frames > 3 and cfg.tracker.coast_max_s == pytest.approx(0.5)
+    hidden = [tr.update(*_frames(cfg, s, 0.3 + k / 3, foam=True), 0.3 + k / 3) for k in range(3)]  # 3 fps
+    assert [tk.status for tk in hidden] == ["coasting", "coasting", "lost"]  # 0.07, 0.40, 0.73 s after it
+    assert hidden[-1].T_base_model is None
+
+
+def test_an_answer_found_on_its_own_frame_but_late_is_confirmed_on_the_next(sim, monkeypatch):
+    """Real time: a whole-volume search that ended on the frame it started on after that frame
+    had taken CONFIRM_AFTER_S (here any time at all) is no pose yet: it is measured again on the
+    next frame, as an answer that ended on a newer frame is, and tracks from there."""
+    cfg, s = sim
+    one = dataclasses.replace(cfg, tracker=dataclasses.replace(cfg.tracker, acquire_generations=100000))
+    tr = Tracker.from_config(s.scene.model, s.rig, one, seed=1, time_budget=True)
+    monkeypatch.setattr("photoservo.vision.tracker.CONFIRM_AFTER_S", 0.0)
+    confirms = []
+    confirm = tr._confirm
+    monkeypatch.setattr(tr, "_confirm", lambda *a, **k: confirms.append(a[-2]) or confirm(*a, **k))
+    first = _run(tr, one, s, 0.0, 1)[0]
+    assert first.status == "acquiring" and first.T_base_model is None and not confirms and tr.held is not None
+    tracks = _run(tr, one, s, 1 / 30, 2)
+    assert tracks[0].status == "tracking" and tracks[0].found and confirms == [pytest.approx(1 / 30)]
+    assert tracks[1].status == "tracking" and tr.acquisitions == 1 and _err(tracks[1], s, 2 / 30) < 15.0
+
+
+def test_a_provisional_answer_failing_its_confirmation_counts_one_acquisition(sim, monkeypatch):
+    """The provisional answer is counted when taken; when its confirmation fails the search goes
+    on, and when it ends it is the same search: one acquisition, not two."""
+    cfg, s = sim
+    tr = _tracker(cfg, s)
+    confirm, calls = tr._confirm, []
+
+    def first_fails(*a, **k):
+        calls.append(a[-2])
+        return (None, None, 0) if len(calls) == 1 else confirm(*a, **k)
+    monkeypatch.setattr(tr, "_confirm", first_fails)
+    tracks = _run(tr, cfg, s, 0.0, 40)
+    assert len(calls) >= 2 and tracks[-1].status == "tracking", [tk.status for tk in tracks]
+    assert tr.acquisitions == 1

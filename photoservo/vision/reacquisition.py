@@ -40,6 +40,7 @@ class Acquiring:
     t: float
     provisional: list[tuple[Detection, Candidate]] = field(default_factory=list)
     tried: bool = False  # the provisional answer was tried (taken, or the search goes on as before)
+    counted: bool = False  # counted in the tracker's acquisitions (its provisional answer was taken)
     taken: Candidate | None = None
     before: tuple[float | None, np.ndarray | None] | None = None
 

@@ -14,9 +14,12 @@ the model is in each image, it lies on known water (`water_gate`) and it is no j
 `max_speed_mm_s`; otherwise the frame is a miss. Status of a frame:
 
   tracking     measured;
-  coasting     a miss, fewer than `lost_frames` in a row: the prediction stands in (from
-               PAIRS_AFTER_S after the last measurement blob pairs are seeded as when lost);
-  lost         `lost_frames` misses in a row while the predicted creature is in view (foam,
+  coasting     a miss, fewer than `lost_frames` in a row and at most `coast_max_s` after the
+               last measurement (a loaded machine's 4 fps made 10 frames 2.5 s): the prediction
+               stands in (from PAIRS_AFTER_S after the last measurement blob pairs are seeded as
+               when lost);
+  lost         `lost_frames` misses in a row, or `coast_max_s` without a measurement, while the
+               predicted creature is in view (foam,
                glare): no pose. The search stays around the predicted track first — its size is
                known, so alpha stays within `window_alpha_frac`; the position window grows with
                the time since the last measurement up to `search_window_mm`, the heading window
@@ -37,7 +40,9 @@ to those of the track's size (alpha within `size_tolerance`), and the one neares
 at that frame's time is the measurement; the tracking search restarts around it. When the search
 ended on a newer frame (at 2-5 fps its answer is seconds old) the answer is measured again on
 that frame (`_confirm`: blob pairs near it seeded, acquire_generations more generations)
-and counts only if it passes there; otherwise the track is lost at once.
+and counts only if it passes there; otherwise the track is lost at once. In real time, an answer
+found on the frame the search started on but CONFIRM_AFTER_S or more after that frame's update
+began (a loaded machine's long frame) is held and confirmed the same way on the next frame.
 
 Provisional answer: when the search has one island (one seed pair: nothing to rank), its fit is
 taken as soon as it passed detection (`acquisition(provisional=)`), before the refinements and the
@@ -86,6 +91,7 @@ from photoservo.vision.tracker_params import TrackerParams
 Status = Literal["acquiring", "tracking", "coasting", "lost", "out_of_view"]
 LOCAL_SEARCH_S = 1.0  # lost this long after the last measurement: the whole volume is searched too
 PAIRS_AFTER_S = 0.5  # the last measurement this old (a loaded machine's long frames): blob pairs seeded
+CONFIRM_AFTER_S = 0.25  # real time: a search that ended on its own frame this long after it began is confirmed on the next
 REFERENCE_FPS = 30.0  # the frame rate acquire_generations is a per-frame share at (Hz)...
 SHARE_MAX = 4  # ...and a later frame's share at most this many times it (longer frames feed on themselves)
 
@@ -156,6 +162,7 @@ class Tracker:
         self.t_frame: float | None = None  # capture time of the frame before (s)
         self.share = params.acquire_generations  # this frame's share of the whole-volume search
         self.time_budget = time_budget  # False: always run generations_per_frame (deterministic)
+        self.held: _Measured | None = None  # an answer held for confirmation on the next frame (CONFIRM_AFTER_S)
 
     @classmethod
     def from_config(cls, model: PhotoModel, rig: Rig, cfg: TrackerConfig, *, seed: int = 0,
@@ -200,12 +207,18 @@ class Tracker:
             m, best, n = self._measure_step(frame, T_base_left, T_left_base, T_new_old, t, gens, near)
         behind = (self.acquiring is not None and self.acquiring.taken is not None  # a provisional track's search
                   and self.status in ("tracking", "coasting"))
+        held, self.held = self.held, None
         if behind:
             acq, n_acq = self._final_step(frame, left_bgr, right_bgr, T_base_left, t)
             m = m if self.search is not None else None  # not dropped: this frame's measurement stands
+        elif m is None and held is not None:  # the answer of the frame before, held for this one
+            acq = held
         elif m is None and (self.search is None or far or self.acquiring is not None
                             or (self.status == "lost" and t - self.motion.t_last > LOCAL_SEARCH_S)):
             acq, n_acq = self._acquire_step(frame, left_bgr, right_bgr, T_base_left, t)
+        if (acq is not None and acq.t >= t and self.time_budget
+                and time.perf_counter() - t0 > CONFIRM_AFTER_S):  # found on this frame, but reported seconds late
+            self.held, acq = acq, None
         if acq is not None:  # found on the frame it started on: taken, then confirmed on this one
             track_before = dataclasses.replace(self.motion), self.status
             self._accept(acq)
@@ -304,7 +317,7 @@ class Tracker:
             self.search = None  # the whole volume is searched for its return, on a frame it is in
             if self.acquiring is not None and self.acquiring.taken is not None:
                 self.acquiring = None  # (a search behind the track runs on a frame from before it left)
-        elif self.search is not None and self.misses < self.p.lost_frames:
+        elif self.search is not None and self.misses < self.p.lost_frames and t - (self.motion.t_last or t) <= self.p.coast_max_s:
             self.status = "coasting"
         else:
             self.status = "lost"  # the search stays around the predicted track
@@ -331,7 +344,7 @@ class Tracker:
                 n += next(a.steps)
         except StopIteration as end:
             self.acquiring = None
-            self.acquisitions += bool(end.value.islands) and a.taken is None  # a search ran (none without blob pairs)
+            self.acquisitions += bool(end.value.islands) and not a.counted  # a search ran (none without blob pairs)
             return self._chosen(end.value.results, a, a.before), n
         if a.provisional and not a.tried:  # its one island passed detection: taken before the refinements
             a.tried = True
@@ -340,7 +353,8 @@ class Tracker:
             m = self._chosen(a.provisional, a)
             if m is not None:
                 a.taken, a.before = m.c, before
-                self.acquisitions += 1
+                self.acquisitions += not a.counted  # once a search, whether or not it is confirmed
+                a.counted = True
             return m, n
         return None, n
 

@@ -20,7 +20,8 @@ class TrackerParams:
     window_heading_deg: float  # ... +- this around the predicted heading (deg)
     window_tilt_deg: float  # ... +- this around the predicted tilt (deg)
     window_alpha_frac: float  # ... alpha within a factor 1 +- this of the track's
-    lost_frames: int  # misses in a row before the track is declared lost
+    lost_frames: int  # misses in a row before the track is declared lost...
+    coast_max_s: float  # ...or this long without a measurement (s), whichever comes first
     gain_position: float  # alpha-beta filter: position gain (0..1)
     gain_velocity: float  # alpha-beta filter: velocity gain (0..1)
     gain_alpha: float  # smoothing of the size ratio alpha (0..1)
@@ -44,6 +45,7 @@ class TrackerParams:
                 raise InputError(f"config key '{w}{k}': must be in (0, 1], got {getattr(self, k)}")
         if self.plane_search and not math.isfinite(self.water_z_mm):
             raise InputError(f"config key '{w}plane_search': needs '{w}water_z_mm' (photoservo calibrate water)")
-        for k in ("time_budget_ms", "window_position_mm", "window_alpha_frac", "max_speed_mm_s", "search_window_mm"):
+        for k in ("time_budget_ms", "window_position_mm", "window_alpha_frac", "max_speed_mm_s", "search_window_mm",
+                  "coast_max_s"):
             if getattr(self, k) <= 0:
                 raise InputError(f"config key '{w}{k}': must be > 0, got {getattr(self, k)}")
