@@ -120,9 +120,10 @@ def test_no_motion_before_enable(emu, link):
 
 
 def test_move_reaches_target():
-    # a long watchdog: this test is about reaching the target, and the shared test machine can
-    # stall the streaming thread for more than 3 periods (the watchdog test covers those)
-    with Emulator(emu_params(watchdog_periods=50, brake_after_s=2.0)) as emu, \
+    # the longest watchdog (1 s): this test is about reaching the target, and the shared test
+    # machine can stall the streaming thread for more than 3 periods (the watchdog test covers
+    # those; at load 6-11, 50 periods were not always enough)
+    with Emulator(emu_params(watchdog_periods=250, brake_after_s=2.0)) as emu, \
             Link(emu.path, link_params()) as link:
         _move_reaches_target(emu, link)
 
@@ -131,7 +132,8 @@ def _move_reaches_target(emu, link):
     link.enable()
     q0 = link.wait_state().q
     target = q0 + np.radians([10, -5, 8, -6, 12, 9, -15])
-    stream(link, q0, target, hold=25)  # hold 0.1 s: the emulator thread may lag on a busy machine
+    stream(link, q0, target, hold=25)  # hold 0.1 s, then wait: the emulator thread may lag on a busy machine
+    wait_for(lambda: np.allclose(link.wait_state().q, target, atol=1e-3))
     s = link.wait_state()
     assert not link.nacks, list(link.nacks)
     np.testing.assert_allclose(s.q, target, atol=1e-3)
@@ -494,13 +496,33 @@ def _stream_half_speed(link: Link, periods: int, pause_at: int = -1, pause_s: fl
         time.sleep(max(0.0, t_next - time.monotonic()))
 
 
-def test_no_setpoint_sent_into_the_bridges_controlled_stop(emu, link):
+def test_no_setpoint_sent_into_the_bridges_controlled_stop():
     """The host stalls for 40 ms in a half-speed move: the bridge's watchdog stops the arm. While
     the bridge reports STOPPING the host sends nothing (each setpoint would be refused; under load
     86-121 SERVO_OFF refusals a second tripped the link-quality gate), then it streams again from
-    the measured state and the bridge takes it."""
-    link.enable()
-    _stream_half_speed(link, 300, pause_at=150, pause_s=0.04)
+    the measured state and the bridge takes it. An attempt in which this test's streaming thread
+    also stalled elsewhere (> 8 ms late: a busy machine; the watchdog then fires there too, as it
+    must, and may still be stopping the arm when the stream ends) does not count; 3 attempts."""
+    for _ in range(3):
+        emu = Emulator(emu_params())
+        emu.start()
+        sent: list[float] = []
+        link = Link(emu.path, link_params())
+        link.open()
+        try:
+            link.enable()
+            _stream_half_speed(link, 300, pause_at=150, pause_s=0.04,
+                               on_period=lambda k, q: sent.append(time.monotonic()))
+            if np.max(np.delete(np.diff(sent), 149)) <= T + 0.008:  # 149: the pause (before period 150)
+                _stopped_then_streaming_again(emu, link)
+                return
+        finally:
+            link.close()
+            emu.stop()
+    pytest.skip("machine too busy: the streaming thread missed its period in 3 attempts")
+
+
+def _stopped_then_streaming_again(emu, link) -> None:
     m = emu.model
     assert m.watchdog_stops >= 1 and link.setpoints_held > 0, (m.watchdog_stops, link.setpoints_held)
     # refused: only those sent before the host could know, i.e. in flight when the stop began or
@@ -512,6 +534,21 @@ def test_no_setpoint_sent_into_the_bridges_controlled_stop(emu, link):
 
 
 
+def _stall_later(pid: int, after_s: float, for_s: float, stalled: list[float]) -> None:
+    """In a thread: after after_s, stop process `pid` (SIGSTOP, as a busy machine does) for
+    for_s, appending the time it stopped to `stalled`."""
+    import signal
+    import threading
+
+    def stall():
+        time.sleep(after_s)
+        os.kill(pid, signal.SIGSTOP)
+        stalled.append(time.monotonic())
+        time.sleep(for_s)
+        os.kill(pid, signal.SIGCONT)
+    threading.Thread(target=stall, daemon=True).start()
+
+
 def test_a_stalled_emulator_process_catches_its_arm_up():
     """The simulator's bridge process stalls for 60 ms (SIGSTOP, as on a busy machine) while the
     host streams a half-speed move. A real arm does not pause: after the stall the emulator runs
@@ -520,9 +557,6 @@ def test_a_stalled_emulator_process_catches_its_arm_up():
     from it and 27 refusals a stall followed). An attempt in which this test's own streaming
     thread missed its period by > 8 ms (a busy machine; the bridge's watchdog then fires for
     another reason) does not count; 3 attempts."""
-    import signal
-    import threading
-
     from photoservo.sim.emulator_process import EmulatorProcess
 
     for _ in range(3):
@@ -530,18 +564,10 @@ def test_a_stalled_emulator_process_catches_its_arm_up():
         emu.start()
         sent: list[tuple[float, float]] = []
         stalled: list[float] = []
-
-        def stall():
-            time.sleep(0.6)
-            os.kill(emu._proc.pid, signal.SIGSTOP)
-            stalled.append(time.monotonic())
-            time.sleep(0.06)
-            os.kill(emu._proc.pid, signal.SIGCONT)
-
         try:
             with Link(emu.path, link_params()) as link:
                 link.enable()
-                threading.Thread(target=stall, daemon=True).start()
+                _stall_later(emu._proc.pid, 0.6, 0.06, stalled)
                 _stream_half_speed(link, 250, on_period=lambda k, q: sent.append((time.monotonic(), q[0])))
                 states = [(s.t, s.q[0]) for s in link.history()]
         finally:
@@ -566,24 +592,14 @@ def test_a_host_stalled_while_the_emulator_stalled_still_trips_the_watchdog():
     """The emulator takes what the host sent during its own stall at the host's stamps: a
     host that sent nothing for 30 ms of that stall left a gap in them, and the bridge's watchdog
     stops the arm there as it would have in real time (a stalled host is the fault it is for)."""
-    import signal
-    import threading
-
     from photoservo.sim.emulator_process import EmulatorProcess
 
     emu = EmulatorProcess(emu_params(), LIMITS)
     emu.start()
-
-    def stall():
-        time.sleep(0.6)
-        os.kill(emu._proc.pid, signal.SIGSTOP)
-        time.sleep(0.1)
-        os.kill(emu._proc.pid, signal.SIGCONT)
-
     try:
         with Link(emu.path, link_params()) as link:
             link.enable()
-            threading.Thread(target=stall, daemon=True).start()
+            _stall_later(emu._proc.pid, 0.6, 0.1, [])
             _stream_half_speed(link, 250, pause_at=160, pause_s=0.03)  # 0.64-0.67 s: inside the stall
     finally:
         emu.stop()

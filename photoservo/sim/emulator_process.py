@@ -62,6 +62,7 @@ def _emulator_main(params: EmulatorParams, limits: PA10Limits, q0, shared, conn,
         m = emu.model
         conn.send(("done", repr(emu.error) if emu.error else "", {
             "accepted": m.accepted, "refused": m.refused, "refusals": dict(m.refusals), "watchdog_stops": m.watchdog_stops,
+            "commands": dict(m.commands),
             "tick_overruns": emu.tick_overruns, "states_skipped": emu.states_skipped, "end": m.describe_end()}))
 
 
