@@ -153,6 +153,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--size-mm", metavar="LO,HI", help="size prior: the target's longest side is LO..HI mm "
                     "(sets alpha_min/alpha_max per photo); default: the default alpha range")
     ap.add_argument("--seeds", type=int, default=1, help="estimator seeds per case (default 1)")
+    ap.add_argument("--first-seed", type=int, default=0, help="the seeds run are FIRST..FIRST+SEEDS-1 (default 0; "
+                    "6 with --seeds 6: the seeds the refinements were not tuned on)")
     ap.add_argument("--targets", default=",".join(TARGET_NAMES), help="targets to run (default: all)")
     ap.add_argument("--variants", default=",".join(VARIANTS), help="photo variants to run (default: all)")
     ap.add_argument("--out", default=str(Path(__file__).parent / "out" / "real_pair.json"))
@@ -166,7 +168,7 @@ def main(argv: list[str] | None = None) -> int:
     size_mm = tuple(float(v) for v in a.size_mm.split(",")) if a.size_mm else None
     rows = []
     for case in cases:
-        for seed in range(a.seeds):
+        for seed in range(a.first_seed, a.first_seed + a.seeds):
             r = run_case(case, size_prior(case, cfg, size_mm), seed)
             r["seed"] = seed
             rows.append(r)
