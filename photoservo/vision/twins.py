@@ -2,7 +2,9 @@
 fitness confuses with the true one. `alternatives`: the planar-pose mirror and the heading turned
 by 180 degrees about the model origin (`PoseSearch.twin_steps`); `turned_about_centroid`: the
 head-to-tail twin at the same place, turned about the photo mask's centroid, which the hue
-fitness scores alike and the appearance cue (`vision/appearance.py`) can tell apart.
+fitness scores alike and the appearance cue (`vision/appearance.py`) can tell apart; with
+`quarters` = +-1 the pose turned a quarter about that centroid (`candidates.quarter_twins`: an oblong
+target inside a region of its hues, fitted across it).
 
 Frames: R, t model in the left camera frame (mm); alpha px/mm.
 """
@@ -50,13 +52,23 @@ def mask_centroid_mm(model: PhotoModel, alpha: float) -> np.ndarray:
                      (m["m01"] / m["m00"] - model.origin_px[1]) / alpha, 0.0])
 
 
-def turned_about_centroid(R: np.ndarray, t: np.ndarray, alpha: float, model: PhotoModel, aspect: float = 1.0
-                          ) -> tuple[np.ndarray, np.ndarray]:
+def turned_about_centroid(R: np.ndarray, t: np.ndarray, alpha: float, model: PhotoModel, aspect: float = 1.0,
+                          quarters: int = 2) -> tuple[np.ndarray, np.ndarray]:
     """The head-to-tail twin of a pose: the model turned by 180 degrees about its normal through
     the photo mask's centroid (not the box centre: the creature stays where it lies). R (3, 3)
     rotation, t (3,) mm, alpha px/mm, `aspect` the per-axis k (`Candidate.aspect`). Returns
     (R', t') with R' = R · Rz(pi) and t' = t + 2 M c, M = R · diag(k, 1/k, 1) and c the centroid
-    (`mask_centroid_mm`), so that the centroid stays put: M' c + t' = M c + t."""
+    (`mask_centroid_mm`), so that the centroid stays put: M' c + t' = M c + t. `quarters`: turned by
+    that many quarter turns instead (1: +90 degrees, -1: -90 degrees; `quarter_twins`).
+
+    >>> from types import SimpleNamespace
+    >>> m = SimpleNamespace(mask=np.pad(np.ones((2, 4), np.uint8), ((0, 0), (0, 4))), origin_px=(0.0, 0.0))
+    >>> R2, t2 = turned_about_centroid(np.eye(3), np.zeros(3), 1.0, m, quarters=1)
+    >>> c = mask_centroid_mm(m, 1.0); bool(np.allclose(R2 @ c + t2, c)), R2[:2, 0].round(6).tolist()
+    (True, [0.0, 1.0])
+    """
     R = np.asarray(R, dtype=np.float64)
     c = mask_centroid_mm(model, alpha) * np.array([aspect, 1.0 / aspect, 0.0])
-    return R @ np.diag([-1.0, -1.0, 1.0]), np.asarray(t, dtype=np.float64) + 2.0 * (R @ c)
+    Rz = np.linalg.matrix_power(np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]]), quarters % 4)
+    R2 = R @ Rz
+    return R2, np.asarray(t, dtype=np.float64) + (R @ c - R2 @ c)
