@@ -18,7 +18,7 @@ from photoservo.sim.arm import LockstepArm
 from photoservo.sim.run import build_sim, run_lockstep
 from photoservo.sim.world import TargetMotion, sim_hand_eye
 from photoservo.sim.scenes import synthetic_rig
-from photoservo.vision.tracker import Track
+from photoservo.vision.track import Track
 
 EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
 

@@ -33,7 +33,7 @@ from photoservo.servo.control import (
 )
 from photoservo.servo.motion import Motion, Setpoint
 from photoservo.vision.rig import Rig
-from photoservo.vision.tracker import Track
+from photoservo.vision.track import Track
 
 Phase = Literal["servo", "descend", "grasp", "ascend", "done", "stopped", "search"]
 PHASES: tuple[str, ...] = get_args(Phase)

@@ -26,7 +26,8 @@ from photoservo.servo.session import (ARM_LOG_EVERY, ControlLoop, Frame, Status,
 from photoservo.servo.warm import warm_kinematics, warm_start
 from photoservo.vision.rig import Rig
 from photoservo.vision.sources import StereoFrame
-from photoservo.vision.tracker import Track, Tracker
+from photoservo.vision.track import Track
+from photoservo.vision.tracker import Tracker
 
 
 @dataclass(frozen=True)

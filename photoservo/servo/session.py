@@ -29,7 +29,8 @@ from photoservo.servo.motion import Motion
 from photoservo.servo.scores import Scores, Truth
 from photoservo.vision.fitness import StereoHue, stereo_hue
 from photoservo.vision.rig import Rig
-from photoservo.vision.tracker import Track, Tracker
+from photoservo.vision.track import Track
+from photoservo.vision.tracker import Tracker
 
 ARM_LOG_EVERY = 5  # control periods per logged arm sample (50 Hz at the 250 Hz control rate)
 

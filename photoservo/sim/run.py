@@ -39,7 +39,8 @@ from photoservo.sim.cameras import SimCameras, SimCamerasConfig
 from photoservo.sim.scenes import synthetic_rig
 from photoservo.sim.world import SimScene, in_view, occluded, sim_hand_eye
 from photoservo.vision.rig import Rig
-from photoservo.vision.tracker import Track, Tracker
+from photoservo.vision.track import Track
+from photoservo.vision.tracker import Tracker
 
 
 @dataclass

@@ -68,7 +68,7 @@ import dataclasses
 import math
 import time
 from dataclasses import dataclass
-from typing import Literal, Protocol
+from typing import Protocol
 
 import numpy as np
 
@@ -77,7 +77,6 @@ from photoservo.vision.detection import Detection
 from photoservo.vision.estimator import EstimatorParams, acquisition
 from photoservo.vision.fitness import FitnessParams, StereoHue
 from photoservo.vision.ga import GAParams
-from photoservo.vision.heave import Heave
 from photoservo.vision.measurement import visible_shares, water_gate
 from photoservo.vision.motion_model import MotionModel
 from photoservo.vision.photo_model import PhotoModel
@@ -86,37 +85,14 @@ from photoservo.vision.rig import Rig
 from photoservo.vision.reacquisition import Acquiring, choose, near_pairs, same_answer, window_region
 from photoservo.vision.water_search import on_plane, on_water_fitness
 from photoservo.vision.seeding import BlobPair
+from photoservo.vision.track import Status, Track
 from photoservo.vision.tracker_params import TrackerParams
 
-Status = Literal["acquiring", "tracking", "coasting", "lost", "out_of_view"]
 LOCAL_SEARCH_S = 1.0  # lost this long after the last measurement: the whole volume is searched too
 PAIRS_AFTER_S = 0.5  # the last measurement this old (a loaded machine's long frames): blob pairs seeded
 CONFIRM_AFTER_S = 0.25  # real time: a search that ended on its own frame this long after it began is confirmed on the next
 REFERENCE_FPS = 30.0  # the frame rate acquire_generations is a per-frame share at (Hz)...
 SHARE_MAX = 4  # ...and a later frame's share at most this many times it (longer frames feed on themselves)
-
-
-@dataclass(frozen=True)
-class Track:
-    """The tracker's answer for one frame. Poses in the BASE frame (mm); `R_left`, `t_left` the
-    measured pose in that frame's left camera (for drawing the model on the images)."""
-
-    t: float  # capture time of the frame (s)
-    status: Status
-    found: bool  # this frame's best pose passed every test: a measurement
-    fitness: float
-    T_base_model: np.ndarray | None  # filtered target pose (tracking and coasting only)
-    velocity_mm_s: np.ndarray  # filtered target velocity (base frame)
-    alpha: float | None  # filtered px/mm
-    size_mm: tuple[float, float] | None
-    R_left: np.ndarray | None
-    t_left: np.ndarray | None
-    alpha_measured: float | None
-    generations: int  # GA generations of the tracking search this frame
-    seconds: float
-    acquire_generations: int = 0  # GA generations of the whole-volume search this frame
-    coast_s: float = 0.0  # how much older than the frame the measurement behind its pose is (s)
-    heave: Heave | None = None  # known water: the fitted heave (vision/heave.py), its times relative to t
 
 
 class TrackerConfig(Protocol):
