@@ -293,7 +293,8 @@ class Tracker:
             self.search = None  # the whole volume is searched for its return, on a frame it is in
             if self.acquiring is not None and self.acquiring.taken is not None:
                 self.acquiring = None  # (a search behind the track runs on a frame from before it left)
-        elif self.search is not None and self.misses < self.p.lost_frames and t - (self.motion.t_last or t) <= self.p.coast_max_s:
+        elif (self.search is not None and self.misses < self.p.lost_frames
+              and (self.motion.t_last is None or t - self.motion.t_last <= self.p.coast_max_s)):
             self.status = "coasting"
         else:
             self.status = "lost"  # the search stays around the predicted track
