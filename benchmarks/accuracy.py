@@ -53,7 +53,8 @@ from photoservo.fileio import write_text_atomic
 from photoservo.config import load_config
 from photoservo.vision.detection import detect
 from photoservo.vision.estimator import estimate
-from photoservo.vision.pose_search import GeneSpace, PoseSearch
+from photoservo.vision.genes import GeneSpace
+from photoservo.vision.pose_search import PoseSearch
 from photoservo.vision.fitness import stereo_hue
 from photoservo.vision.ga import paper_params
 from photoservo.vision.photo_model import build_photo_model

@@ -40,7 +40,8 @@ from photoservo.config import load_config
 from photoservo.fileio import write_text_atomic
 from photoservo.sim.middlebury import TARGETS as TARGET_NAMES, VARIANTS, real_cases
 from photoservo.vision.estimator import estimate, search_frame
-from photoservo.vision.pose_search import GeneSpace, PoseSearch
+from photoservo.vision.genes import GeneSpace
+from photoservo.vision.pose_search import PoseSearch
 from photoservo.vision.fitness import fitness, stereo_hue
 from photoservo.vision.rig import project_points
 

@@ -11,7 +11,8 @@ import pytest
 
 from photoservo.config import load_config
 from photoservo.vision.estimator import estimate
-from photoservo.vision.pose_search import Convergence, GeneSpace, PoseSearch
+from photoservo.vision.genes import GeneSpace
+from photoservo.vision.pose_search import Convergence, PoseSearch
 from photoservo.vision.twins import reflected_rotation
 from photoservo.vision.seeding import blob_pairs
 from photoservo.vision.fitness import stereo_hue

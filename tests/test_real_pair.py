@@ -20,7 +20,7 @@ from photoservo.sim.middlebury import (  # noqa: E402
     red_region,
     right_disparity,
 )
-from photoservo.vision.pose_search import GeneSpace  # noqa: E402
+from photoservo.vision.genes import GeneSpace  # noqa: E402
 from photoservo.vision.fitness import fitness, stereo_hue  # noqa: E402
 from photoservo.vision.rig import project_points  # noqa: E402
 

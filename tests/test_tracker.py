@@ -9,7 +9,7 @@ import pytest
 from photoservo.robot import pa10
 from photoservo.config import load_config
 from photoservo.sim.run import build_sim
-from photoservo.vision.pose_search import GeneSpace
+from photoservo.vision.genes import GeneSpace
 from photoservo.vision.fitness import stereo_hue
 from photoservo.sim.renderer import Foam, Scene
 from photoservo.vision.estimator import acquisition, estimate

@@ -1,5 +1,5 @@
 """Compiled (numba) decoding of the GA's genes into poses (method step 4): what
-`pose_search.GeneSpace.decode` computes, in one pass per individual. The tracker decodes its
+`genes.GeneSpace.decode` computes, in one pass per individual. The tracker decodes its
 population two or three times a generation (the water gates, the fitness, the best individual);
 the numpy version (`GeneSpace.decode_reference`, ~50 small array operations) cost about as much
 as the fitness kernel itself there.

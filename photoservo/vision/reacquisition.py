@@ -17,7 +17,8 @@ from photoservo.vision.estimator import Acquired, EstimatorParams
 from photoservo.vision.fitness import StereoHue
 from photoservo.vision.ga import Region
 from photoservo.vision.photo_model import PhotoModel
-from photoservo.vision.pose_search import Candidate, GeneSpace
+from photoservo.vision.genes import GeneSpace
+from photoservo.vision.pose_search import Candidate
 from photoservo.vision.rig import Rig
 from photoservo.vision.seeding import BlobPair, blob_pairs
 

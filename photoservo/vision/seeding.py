@@ -18,7 +18,7 @@ import numpy as np
 
 from photoservo.vision.ga import Region
 from photoservo.vision.photo_model import HUE_BINS, PhotoModel
-from photoservo.vision.pose_search import GeneSpace
+from photoservo.vision.genes import GeneSpace
 from photoservo.vision.rig import Rig
 
 if TYPE_CHECKING:
