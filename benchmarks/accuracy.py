@@ -33,7 +33,9 @@ false-positive and miss rates it would give. configs/default.toml takes that val
 
 The machine has 2 cores shared with other jobs: wall times are medians on a loaded machine.
 Prints tables and writes benchmarks/out/accuracy.json.
-Run: python benchmarks/accuracy.py [--quick] [--scenes 60] [--nulls 50]
+Scenes 1000-1059 and nulls 1500-1599 are the ones every tuning step was measured on; the held-out
+check is `--first-scene 100 --first-null 100` (seeds 1100-1159 and 1600-1699, which no step looked at).
+Run: python benchmarks/accuracy.py [--quick] [--scenes 60] [--nulls 50] [--first-scene K] [--first-null K]
 """
 
 from __future__ import annotations
@@ -235,6 +237,10 @@ def main(argv: list[str] | None = None) -> int:
                     help="scene generator: sim/renderer.py (default) or the independent sim/harbour.py")
     ap.add_argument("--many-hued", type=int, default=0, metavar="N",
                     help="N extra scenes of the harbour generator's many-hued fish (its hues include the water's)")
+    ap.add_argument("--first-scene", type=int, default=0, metavar="K",
+                    help="target scenes K..K+N-1 (seeds 1000+K..): K >= 100 gives scenes no tuning step looked at")
+    ap.add_argument("--first-null", type=int, default=0, metavar="K",
+                    help="null scenes K..K+N-1 (seeds 1500+K..; at most 200 in all, the many-hued fish are 1700+)")
     ap.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE")
     ap.add_argument("--out", default=None, help="JSON (default benchmarks/out/accuracy[_harbour].json)")
     a = ap.parse_args(argv)
@@ -242,6 +248,10 @@ def main(argv: list[str] | None = None) -> int:
         a.out = str(Path(__file__).parent / "out" / f"accuracy{'_harbour' if a.generator == 'harbour' else ''}.json")
     if a.quick:
         a.scenes, a.nulls, a.baseline = 12, 8, 4
+    if a.first_scene < 0 or a.first_scene + a.scenes > 500:
+        ap.error(f"--first-scene {a.first_scene} with --scenes {a.scenes}: target seeds must stay within 1000..1499")
+    if a.first_null < 0 or a.first_null + a.nulls > 200:
+        ap.error(f"--first-null {a.first_null} with --nulls {a.nulls}: null seeds must stay within 1500..1699")
     cfg = load_config(None, a.overrides)
     load = os.getloadavg()
     print(f"accuracy benchmark: {a.scenes} target scenes, {a.nulls} null scenes; load average "
@@ -251,7 +261,7 @@ def main(argv: list[str] | None = None) -> int:
     estimate(model, sc.left, sc.right, sc.rig, cfg.ga, cfg.estimator, cfg.fitness, seed=0)
 
     rows, scenes = [], []
-    for i in range(a.scenes):
+    for i in range(a.first_scene, a.first_scene + a.scenes):
         other = i % 2 == 1
         sc, model = make_scene(i, cfg, other=other, distractor=i % 4 == 3, split=is_split(i), generator=a.generator)
         scenes.append((sc, model))
@@ -281,7 +291,7 @@ def main(argv: list[str] | None = None) -> int:
               f"pos {r['pos_pct']:.2f}% size {r['size_pct']:.1f}% {r['seconds']:.2f}s", flush=True)
 
     nulls = []
-    for j in range(a.nulls):
+    for j in range(a.first_null, a.first_null + a.nulls):
         distractor = j % 2 == 1
         sc, model = make_scene(500 + j, cfg, empty=True, distractor=distractor, generator=a.generator)
         est = estimate(model, sc.left, sc.right, sc.rig, cfg.ga, cfg.estimator, cfg.fitness, seed=j)
@@ -410,7 +420,7 @@ def main(argv: list[str] | None = None) -> int:
                                              "note": "shared, loaded machine: wall times are medians under load"},
         "config": {"ga": dataclasses.asdict(cfg.ga), "estimator": dataclasses.asdict(cfg.estimator)},
         "targets": targets, "table": table, "misses": misses, "false_positives": fp, "calibration": calib,
-        "generator": a.generator, "scenes": rows, "many_hued": many, "nulls": nulls, "baselines": baseline_rows,
+        "generator": a.generator, "first_scene": a.first_scene, "first_null": a.first_null, "scenes": rows, "many_hued": many, "nulls": nulls, "baselines": baseline_rows,
         "python": sys.version.split()[0],
     }
     write_text_atomic(a.out, json.dumps(finite(out), indent=1))
