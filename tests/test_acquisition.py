@@ -70,6 +70,54 @@ def test_split_creature_is_found_whole(split_crab):
     assert old.candidates[0]["alpha_px_per_mm"] / a_true - 1 > 0.15
 
 
+@pytest.fixture(scope="module")
+def split_in_one_image():
+    """The accuracy benchmark's held-out renderer scene 1152 (every effect on): a fish at 1180 mm,
+    a foam band across its body; the left camera sees it in two pieces, the right one whole."""
+    from photoservo.sim.scenes import EFFECTS
+
+    sc = random_scene(1152, CFG.synthetic, CFG.photo_model, kind="fish", effects=tuple(EFFECTS), split=True)
+    return sc, build_photo_model(sc.photo, CFG.photo_model)
+
+
+def test_pieces_in_one_image_pair_with_the_whole_blob_in_the_other(split_in_one_image):
+    """No piece matches the other camera's blob alone, so there is no pair and nothing to group;
+    `split_pairs` takes the left pieces together and pairs them with the right blob, at the
+    creature's depth."""
+    from photoservo.vision.seeding import split_pairs, stereo_blobs
+
+    sc, model = split_in_one_image
+    frame = stereo_hue(sc.left, sc.right, CFG.fitness)
+    left, right = stereo_blobs(frame.left, frame.right, model, CFG.estimator)
+    assert len(left) >= 2 and len(right) == 1
+    pairs = blob_pairs(frame.left, frame.right, model, sc.rig, CFG.estimator)
+    assert not pairs and not group_pairs(pairs, CFG.estimator)
+    split = split_pairs(left, right, pairs, sc.rig, CFG.estimator)
+    t = np.array(sc.truth["position_mm"])
+    assert split and split[0].left.area == pytest.approx(left[0].area + left[1].area)
+    assert abs(split[0].position_mm[2] / t[2] - 1) < 0.05
+
+
+def test_creature_split_in_one_image_is_found(split_in_one_image):
+    sc, model = split_in_one_image
+    est = estimate(model, sc.left, sc.right, sc.rig, CFG.ga, CFG.estimator, CFG.fitness, seed=152)
+    t = np.array(sc.truth["position_mm"])
+    assert est.found and np.linalg.norm(est.position_mm - t) < 0.02 * t[2]
+    assert abs(est.alpha_px_per_mm / sc.truth["alpha_px_per_mm"] - 1) < 0.04
+
+
+def test_pieces_each_paired_on_their_own_are_not_split_pairs(split_crab):
+    """Where every piece has its partner in the other image, `group_pairs` joins them and
+    `split_pairs` adds nothing."""
+    from photoservo.vision.seeding import split_pairs, stereo_blobs
+
+    sc, model = split_crab
+    frame = stereo_hue(sc.left, sc.right, CFG.fitness)
+    left, right = stereo_blobs(frame.left, frame.right, model, CFG.estimator)
+    pairs = blob_pairs(frame.left, frame.right, model, sc.rig, CFG.estimator)
+    assert group_pairs(pairs, CFG.estimator) and not split_pairs(left, right, pairs, sc.rig, CFG.estimator)
+
+
 def _variants(img: np.ndarray) -> dict[str, np.ndarray]:
     f = img.astype(np.float32)
     return {"brighter": np.clip(f * 1.3, 0, 255).astype(np.uint8),

@@ -54,7 +54,15 @@ from photoservo.vision.parts import model_parts
 from photoservo.vision.photo_model import HUE_BINS, PhotoModel
 from photoservo.vision.pose_search import Candidate, PoseSearch, drive
 from photoservo.vision.rig import Rig
-from photoservo.vision.seeding import ModelShape, blob_pairs, group_pairs, seed_genes, target_mask
+from photoservo.vision.seeding import (
+    ModelShape,
+    group_pairs,
+    match_blobs,
+    seed_genes,
+    split_pairs,
+    stereo_blobs,
+    target_mask,
+)
 from photoservo.vision.silhouette import distinctive_weight, silhouette_pairs
 
 
@@ -211,9 +219,12 @@ def _islands(model: PhotoModel, rig: Rig, frame: StereoHue, ga_params: GAParams,
                     layout_pairs(frame.left, frame.right, model, shape.area, rig, p))
             pairs = [bp for k in range(max(map(len, both))) for src in both for bp in src[k:k + 1]]
         else:
-            pairs = blob_pairs(frame.left, frame.right, model, rig, p)
-            # groups of pieces (a creature split by foam) beside the single blobs, largest first
-            pairs = sorted(group_pairs(pairs, p) + pairs, key=lambda bp: -bp.left.area)
+            left, right = stereo_blobs(frame.left, frame.right, model, p)
+            pairs = match_blobs(left, right, rig, p)
+            # groups of pieces (a creature split by foam: in both images, or in one only) beside
+            # the single blobs, largest first
+            pairs = sorted(group_pairs(pairs, p) + split_pairs(left, right, pairs, rig, p) + pairs,
+                           key=lambda bp: -bp.left.area)
         pairs = pairs[: p.max_candidates]
         for i, (pair, s) in enumerate(zip(pairs, ss.spawn(len(pairs)))):
             rng = np.random.default_rng(s)

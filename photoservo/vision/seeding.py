@@ -179,12 +179,61 @@ def match_blobs(left: list[Blob], right: list[Blob], rig: Rig, params: Estimator
     return pairs
 
 
+def stereo_blobs(hue_left: np.ndarray, hue_right: np.ndarray, model: PhotoModel,
+                 params: EstimatorParams) -> tuple[list[Blob], list[Blob]]:
+    """The model's target-hue blobs of the left and the right hue image (`target_blobs`,
+    min_blob_px), largest first."""
+    return (target_blobs(hue_left, model.target_hues, params.min_blob_px),
+            target_blobs(hue_right, model.target_hues, params.min_blob_px))
+
+
 def blob_pairs(hue_left: np.ndarray, hue_right: np.ndarray, model: PhotoModel, rig: Rig,
                params: EstimatorParams) -> list[BlobPair]:
-    """The model's target-hue blobs of both hue images (`target_blobs`, min_blob_px) paired along
-    the epipolar lines (`match_blobs`)."""
-    return match_blobs(target_blobs(hue_left, model.target_hues, params.min_blob_px),
-                       target_blobs(hue_right, model.target_hues, params.min_blob_px), rig, params)
+    """The model's target-hue blobs of both hue images (`stereo_blobs`) paired along the epipolar
+    lines (`match_blobs`)."""
+    return match_blobs(*stereo_blobs(hue_left, hue_right, model, params), rig, params)
+
+
+def near_groups(blobs: list[Blob], reach: float) -> list[list[Blob]]:
+    """Blobs of ONE image that lie near each other: connected components of "the gap between two
+    centroids is at most `reach` times the sum of their half-lengths", two or more members each."""
+    near = np.array([[float(np.linalg.norm(a.centroid - b.centroid)) <= reach * (a.half_length + b.half_length)
+                      for b in blobs] for a in blobs], dtype=bool).reshape(len(blobs), len(blobs))
+    return [[blobs[k] for k in c] for c in components(near)]
+
+
+def components(near: np.ndarray) -> list[list[int]]:
+    """Connected components of two or more members of a symmetric "near" relation (n x n bool; n
+    is a handful of blobs), in order of their first member."""
+    n = len(near)
+    label = list(range(n))
+    for i in range(n):
+        for j in range(n):
+            if near[i, j] and label[j] != label[i]:
+                old, new = max(label[i], label[j]), min(label[i], label[j])
+                label = [new if x == old else x for x in label]
+    return [[k for k in range(n) if label[k] == g] for g in sorted(set(label)) if label.count(g) > 1]
+
+
+def split_pairs(left: list[Blob], right: list[Blob], pairs: list[BlobPair], rig: Rig,
+                params: EstimatorParams) -> list[BlobPair]:
+    """A creature in pieces in one image and not in the other (foam, a glint or a wave crest seen
+    differently by the two cameras, or a gap one camera's blob merging closes): no piece matches
+    a blob of the other image alone, so `match_blobs` pairs nothing and `group_pairs` has nothing
+    to group. Here each image's groups of near pieces (`near_groups`, `group_reach`) of which no
+    piece found a partner in `pairs` are taken together (`union`) and matched with the other
+    image's single blobs. (Where a piece did pair, its island grows from it, and taking it with
+    an unpaired neighbour - a glint-cut leg, a fleck of foam - only adds a worse-seeded island.)
+    Largest first."""
+    out = []
+    for mine, other, flip in ((left, right, False), (right, left, True)):
+        matched = [bp.right if flip else bp.left for bp in pairs]
+        for group in near_groups(mine, params.group_reach):
+            if any(any(b.area == m.area and np.array_equal(b.centroid, m.centroid) for m in matched) for b in group):
+                continue  # a piece paired on its own: its island (and `group_pairs`) grow from it
+            u = [union(group)]
+            out += match_blobs(other, u, rig, params) if flip else match_blobs(u, other, rig, params)
+    return sorted(out, key=lambda bp: -bp.left.area)
 
 
 def group_pairs(pairs: list[BlobPair], params: EstimatorParams) -> list[BlobPair]:
@@ -205,17 +254,8 @@ def group_pairs(pairs: list[BlobPair], params: EstimatorParams) -> list[BlobPair
                 reach = params.group_reach * (ba.half_length + bb.half_length)
                 ok &= float(np.linalg.norm(ba.centroid - bb.centroid)) <= reach
             near[i, j] = near[j, i] = ok
-    label = list(range(n))
-    for i in range(n):  # connected components (n is small)
-        for j in range(n):
-            if near[i, j] and label[j] != label[i]:
-                old, new = max(label[i], label[j]), min(label[i], label[j])
-                label = [new if x == old else x for x in label]
     groups = []
-    for g in sorted(set(label)):
-        members = [pairs[k] for k in range(n) if label[k] == g]
-        if len(members) < 2:
-            continue
+    for members in ([pairs[k] for k in c] for c in components(near)):
         w = np.array([m.left.area for m in members])
         pos = (w[:, None] * np.array([m.position_mm for m in members])).sum(axis=0) / w.sum()
         groups.append(BlobPair(position_mm=pos, left=union([m.left for m in members]),
