@@ -96,8 +96,8 @@ def postgres() -> Iterator[str]:
 
 def test_two_workers_share_a_postgresql_study(postgres: str):
     """Two worker processes (as two cluster nodes would run it, each its own --seed) share one
-    study on the server: 4 trials complete, numbered 0..3, none FAILed, PRUNED or run twice,
-    and both workers ran trials."""
+    study on the server: 4 trials complete, numbered 0..3, none FAILed, PRUNED or run twice
+    (but for an empty placeholder past the budget, below), and both workers ran trials."""
     common = [*TINY, "--worlds", "1", "--trials", "4", "--storage", postgres, "--study", "pg"]
     first = _tune(*common, "--seed", "0")
     # The first node creates the study and starts running its first trial; it is held there
@@ -116,6 +116,12 @@ def test_two_workers_share_a_postgresql_study(postgres: str):
     outs = [p.communicate(timeout=600) for p in (first, second)]
     assert first.returncode == 0 and second.returncode == 0, [o[1][-2000:] for o in outs]
     trials = _trials(postgres, "pg")
+    # Two workers that end their trials at the same moment both see 3 of 4 used and both take a
+    # new trial number; the later one finds the budget used and prunes its trial before it
+    # suggests or measures anything (`run_worker`'s guard): such a placeholder is allowed, nothing else.
+    placeholders = [t for t in trials if t.state.name == "PRUNED" and not t.params and not t.user_attrs]
+    assert all(t.number >= 4 for t in placeholders)
+    trials = [t for t in trials if t not in placeholders]
     assert [t.number for t in trials] == [0, 1, 2, 3]
     assert [t.state.name for t in trials] == ["COMPLETE"] * 4
     assert len({t.user_attrs["worker"] for t in trials}) == 2
