@@ -227,7 +227,8 @@ def test_the_crate_at_0_6x_is_not_grown_past_it_on_a_point_of_fitness(monkeypatc
     island ends 7 % off in size; grown by 1.2 the short GA finds a fit 30 % too large that scores
     0.004 higher, less than one sampling point (`fitness.point_weight`, 1/115 = 0.0087). A grown fit
     is kept only when it wins by more than that (`PoseSearch.grown_steps`' min_gain); with no margin
-    the estimate is the overshoot."""
+    the estimate is the overshoot (the shrunk turns after the grown fits, `candidates.shrunk_turns`,
+    would take it back, 2.4 % off: left out of that case, so that it measures the margin alone)."""
     from photoservo.vision import candidates, estimator
 
     c, = real_cases(CFG.photo_model, targets=("crate",), variants=("scaled",))
@@ -235,7 +236,11 @@ def test_the_crate_at_0_6x_is_not_grown_past_it_on_a_point_of_fitness(monkeypatc
     size = {}
     for margin in (True, False):
         if not margin:
+            def unshrunk(search, cand, *args):
+                return cand
+                yield  # a generator, as the step it stands for
             monkeypatch.setattr(candidates, "point_weight", lambda model, params: 0.0)
+            monkeypatch.setattr(candidates, "shrunk_turns", unshrunk)
         est = estimator.estimate(c.model, c.left, c.right, c.rig, CFG.ga, CFG.estimator, CFG.fitness, seed=4)
         assert est.found
         size[margin] = abs(tr["alpha_px_per_mm"] / est.alpha_px_per_mm - 1)
