@@ -236,11 +236,8 @@ def test_the_crate_at_0_6x_is_not_grown_past_it_on_a_point_of_fitness(monkeypatc
     size = {}
     for margin in (True, False):
         if not margin:
-            def unshrunk(search, cand, *args):
-                return cand
-                yield  # a generator, as the step it stands for
             monkeypatch.setattr(candidates, "point_weight", lambda model, params: 0.0)
-            monkeypatch.setattr(candidates, "shrunk_turns", unshrunk)
+            monkeypatch.setattr(candidates, "shrunk_turns", _unchanged)
         est = estimator.estimate(c.model, c.left, c.right, c.rig, CFG.ga, CFG.estimator, CFG.fitness, seed=4)
         assert est.found
         size[margin] = abs(tr["alpha_px_per_mm"] / est.alpha_px_per_mm - 1)
@@ -318,6 +315,13 @@ def test_the_crate_cut_from_the_right_image_is_turned_a_quarter_off_the_ridge(mo
     assert size[True] < 0.15 < 0.2 < size[False], size
 
 
+def _unchanged(search, cand, *args):
+    """A refinement step of `candidates` that leaves the fit as it is (a generator, as the step it
+    stands for)."""
+    return cand
+    yield
+
+
 def _size_with_and_without(monkeypatch, variant: str, seed: int, step: str) -> dict[bool, float]:
     """The crate's photo `variant`, full size: the estimate's size error (|alpha_true / alpha - 1|) with
     the refinement `candidates.<step>` (True) and with it leaving the fit as it is (False); found and
@@ -329,10 +333,7 @@ def _size_with_and_without(monkeypatch, variant: str, seed: int, step: str) -> d
     size = {}
     for on in (True, False):
         if not on:
-            def unchanged(search, cand, *args):
-                return cand
-                yield  # a generator, as the step it stands for
-            monkeypatch.setattr(candidates, step, unchanged)
+            monkeypatch.setattr(candidates, step, _unchanged)
         est = estimator.estimate(c.model, c.left, c.right, c.rig, CFG.ga, CFG.estimator, CFG.fitness, seed=seed)
         assert est.found
         assert abs(est.position_mm[2] / tr["distance_mm"] - 1) < 0.05
