@@ -128,8 +128,8 @@ STEREO_DEPTH_MIN = 1.03
 def refined(search: PoseSearch, c: Candidate, frame: StereoHue, left_bgr: np.ndarray, right_bgr: np.ndarray,
             p: EstimatorParams) -> Generator[int, None, Candidate]:
     """The leading island's refinements, one generation per step: where the contour rule scores, the
-    grown fits (`PoseSearch.grown_steps`: its narrow peak), its quarter turns (`quarter_twins`) and its
-    turns shrunk (`shrunk_turns`); the look-alike twins (mirror, heading + 180 deg); the tilt from the
+    grown fits (`PoseSearch.grown_steps`: its narrow peak), its turns shrunk (`shrunk_turns`) and its
+    quarter turns (`quarter_twins`); the look-alike twins (mirror, heading + 180 deg); the tilt from the
     stereo plane; the per-axis size; where the contour rule scores, the depth both
     images see under the fit (`stereo_plane.onto_surface`)."""
     if frame.chroma is not None and p.contour_grow > 1.0:
@@ -137,8 +137,8 @@ def refined(search: PoseSearch, c: Candidate, frame: StereoHue, left_bgr: np.nda
         # crate at 0.6x, 115 points) fits 12-30 % too large score alike within a point of the narrow peak
         gain = point_weight(search.model, search.fit_params)
         c = yield from search.grown_steps(c, (1.0, math.sqrt(p.contour_grow), p.contour_grow), min_gain=gain)
-        c = yield from quarter_twins(search, c, gain)
         c = yield from shrunk_turns(search, c, math.sqrt(p.contour_grow), gain)
+        c = yield from quarter_twins(search, c, gain)
     c = yield from search.twin_steps(c)
     if p.plane_refine and np.isfinite(c.fitness):
         c = yield from search.tilt_steps(c, left_bgr, right_bgr)
@@ -196,8 +196,10 @@ def shrunk_turns(search: PoseSearch, c: Candidate, f: float, min_gain: float) ->
     seed 16: 3.7 -> 21.5 %). Shrunk in place (no turn) the tank's and fender's fits went onto the
     ridge inside them (tank left seed 3 3.3 -> 13.1 %, fender left seed 16 1.0 -> 14.4 %); turned and
     grown by f, onto fits past the target tilted 45-52 degrees (the crate at 0.6x seed 5 14.0 ->
-    35.7 %). Own random streams (`Generator.spawn`, one per turn whether tried or not): the search's
-    stream is as before. One generation per step."""
+    35.7 %). Tried before the quarter twins: those can turn such a fit to the target's heading at its
+    grown size (crate left seeds 17, 18: +24-37 %), where only an unturned shrink would reach the peak.
+    Own random streams (`Generator.spawn`, one per turn whether tried or not): the search's stream is
+    as before. One generation per step."""
     if not np.isfinite(c.fitness):
         return c
     best = c
