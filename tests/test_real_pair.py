@@ -323,22 +323,27 @@ def _unchanged(search, cand, *args):
 
 
 def _size_with_and_without(monkeypatch, variant: str, seed: int, step: str) -> dict[bool, float]:
-    """The crate's photo `variant`, full size: the estimate's size error (|alpha_true / alpha - 1|) with
-    the refinement `candidates.<step>` (True) and with it leaving the fit as it is (False); found and
-    within 5 % in depth either way."""
-    from photoservo.vision import candidates, estimator
+    """The crate's photo `variant`, full size: the estimate's size error (`_crate_size`) with the
+    refinement `candidates.<step>` (True) and with it leaving the fit as it is (False)."""
+    from photoservo.vision import candidates
+
+    size = {True: _crate_size(variant, seed)}
+    monkeypatch.setattr(candidates, step, _unchanged)
+    size[False] = _crate_size(variant, seed)
+    return size
+
+
+def _crate_size(variant: str, seed: int) -> float:
+    """The crate's photo `variant`, full size, estimator seed `seed`: the estimate's size error
+    (|alpha_true / alpha - 1|); found and within 5 % in depth."""
+    from photoservo.vision import estimator
 
     c, = real_cases(CFG.photo_model, targets=("crate",), variants=(variant,))
     tr = c.truth
-    size = {}
-    for on in (True, False):
-        if not on:
-            monkeypatch.setattr(candidates, step, _unchanged)
-        est = estimator.estimate(c.model, c.left, c.right, c.rig, CFG.ga, CFG.estimator, CFG.fitness, seed=seed)
-        assert est.found
-        assert abs(est.position_mm[2] / tr["distance_mm"] - 1) < 0.05
-        size[on] = abs(tr["alpha_px_per_mm"] / est.alpha_px_per_mm - 1)
-    return size
+    est = estimator.estimate(c.model, c.left, c.right, c.rig, CFG.ga, CFG.estimator, CFG.fitness, seed=seed)
+    assert est.found
+    assert abs(est.position_mm[2] / tr["distance_mm"] - 1) < 0.05
+    return abs(tr["alpha_px_per_mm"] / est.alpha_px_per_mm - 1)
 
 
 def test_a_fork_before_the_crate_does_not_put_its_fit_on_two_surfaces():
@@ -366,4 +371,23 @@ def test_the_crate_cut_from_the_left_image_is_turned_and_shrunk_off_the_ridge_pa
     and stay below it. Turned and shrunk by the grown fits' first factor (`candidates.shrunk_turns`) its
     short GAs reach the peak at the crate's heading and size."""
     size = _size_with_and_without(monkeypatch, "left", 3, "shrunk_turns")
+    assert size[True] < 0.15 < 0.2 < size[False], size
+
+
+def test_the_crate_cut_from_the_left_image_is_shrunk_before_it_is_turned_a_quarter(monkeypatch):
+    """The crate cut from the left image, full size, estimator seed 17: the leading island ends turned
+    ~100 degrees and grown past the crate. Its quarter twins, tried first, turned it to the crate's
+    heading at that grown size (+24 %), where the shrunk turns (half and quarter turns) find nothing
+    better; the shrunk turns tried first, from the island's own heading, reach the peak at the crate's
+    size (`candidates.refined`)."""
+    import math
+
+    from photoservo.vision import candidates
+
+    shrunk, quarter = candidates.shrunk_turns, candidates.quarter_twins
+    size = {True: _crate_size("left", 17)}
+    monkeypatch.setattr(candidates, "shrunk_turns", lambda search, c, f, gain: quarter(search, c, gain))
+    monkeypatch.setattr(candidates, "quarter_twins",
+                        lambda search, c, gain: shrunk(search, c, math.sqrt(CFG.estimator.contour_grow), gain))
+    size[False] = _crate_size("left", 17)  # the quarter twins first (each still draws its own streams in turn)
     assert size[True] < 0.15 < 0.2 < size[False], size
