@@ -10,10 +10,16 @@ adds a look-alike elsewhere in view. Null scenes: empty water, and empty water w
 
 Per target scene: position error (mm, % of distance), depth error (% of distance), heading error
 and tilt error (deg, separately: a swing-twist split about the model normal,
-geometry.heading_tilt_error), size error (%, |alpha_true / alpha_est - 1|: both sides of the
-box scale alike), generations, evaluations, wall seconds. Success: found and position error
-<= 5 % of the distance. "Converged <= 1 s": success, stopped by the convergence test (not the
-generation cap) and wall time <= 1 s. Null scenes: false-positive rate (found = true).
+geometry.heading_tilt_error), size error (%: each side of the estimated box, `size_mm`, against the
+floating creature's own box, the larger of the two; `alpha_pct` is |alpha_true / alpha_est - 1|
+with alpha_true the truth's, for another individual's photo matched by mask area), generations,
+evaluations, wall seconds. `shape_pct`: the size error the estimator's photo gives at the truth's
+own alpha and the same scale along both axes — 0 for the same photo; for another individual's its
+proportions alone (the renderer draws ONE other individual per kind, `specimens.specimen(kind, 0,
+other=True)`, so its 10 scenes of a kind share one value: squid 11.0 %, fish 7.4 %, crab 4.1 %; the
+harbour draws one per scene). `aspect`: the answer's per-axis k (sqrt(alpha_y / alpha_x)).
+Success: found and position error <= 5 % of the distance. "Converged <= 1 s": success, stopped
+by the convergence test (not the generation cap) and wall time <= 1 s. Null scenes: false-positive rate (found = true).
 
 Rows: the default configuration (configs/default.toml) and, on a subset, the paper's own
 configuration — 68-bit binary GA, 30 individuals, exactly 500 generations, (x, y, z, heading,
@@ -102,8 +108,11 @@ def timed(fn, *args, **kw):
 def errors(est, truth: dict, cpu: float = math.nan) -> dict:
     """Errors of an estimate (found or not) against a synthetic truth."""
     z = truth["position_mm"][2]
+    # what another individual's proportions alone give: its photo's box at the truth's alpha (one scale)
+    shape = np.abs(np.asarray(truth["size_mm"], float) / np.asarray(truth["creature_size_mm"], float) - 1)
     row = {"found": bool(est.found), "distance_mm": z, "tilt_true_deg": truth["tilt_deg"],
-           "same_photo": truth["same_photo"], "fitness": est.fitness, "detection_score": est.detection_score,
+           "same_photo": truth["same_photo"], "shape_pct": 100 * float(shape.max()),
+           "fitness": est.fitness, "detection_score": est.detection_score,
            "contrast": est.contrast,
            "outer_on_target": est.candidates[0]["outer_on_target"] if est.candidates else None,
            "generations": est.generations,
@@ -121,6 +130,8 @@ def errors(est, truth: dict, cpu: float = math.nan) -> dict:
     row.update(pos_mm=pos, pos_pct=100 * pos / z, depth_pct=100 * abs(est.position_mm[2] - z) / z,
                heading_deg=h, tilt_deg=ti, size_pct=100 * float(size_err.max()),
                alpha_pct=100 * abs(truth["alpha_px_per_mm"] / est.alpha_px_per_mm - 1),
+               aspect=(1.0 if est.alpha_xy_px_per_mm is None  # the paper's run: one alpha
+                       else math.sqrt(est.alpha_xy_px_per_mm[1] / est.alpha_xy_px_per_mm[0])),
                success=pos <= SUCCESS_POS_FRAC * z)
     return row
 
@@ -180,7 +191,7 @@ def summary(rows: list[dict], max_generations: int) -> dict:
         return float(np.percentile(v, p, method="linear" if np.all(np.isfinite(v)) else "inverted_cdf"))
     n = len(rows)
     out = {"scenes": n}
-    for key in ("pos_mm", "pos_pct", "depth_pct", "heading_deg", "tilt_deg", "size_pct"):
+    for key in ("pos_mm", "pos_pct", "depth_pct", "heading_deg", "tilt_deg", "size_pct", "alpha_pct", "shape_pct"):
         out[key] = {"median": q(key, 50), "p90": q(key, 90)}
     out["found_rate"] = sum(r["found"] for r in rows) / max(n, 1)
     out["success_rate"] = sum(r["success"] for r in rows) / max(n, 1)
@@ -398,6 +409,10 @@ def main(argv: list[str] | None = None) -> int:
     for name, s in table.items():
         print(fmt_row(name, s))
     print()
+    o = table["default, other photo"]
+    print(f"other photo: size median {o['size_pct']['median']:.1f} %; alpha against the truth's (matched by mask "
+          f"area) {o['alpha_pct']['median']:.1f} %; the photo's box at the truth's own alpha (the other individual's "
+          f"proportions alone) {o['shape_pct']['median']:.1f} %")
     print("target scenes that are not a success, by where they end: " + "; ".join(
         f"{k}: {len(v)} ({', '.join(map(str, v))})" for k, v in sorted(misses.items())))
     print(f"false positives: empty water {sum(fp_empty)}/{len(fp_empty)}, look-alike only {sum(fp_look)}/{len(fp_look)} "
