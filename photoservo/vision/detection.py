@@ -56,7 +56,11 @@ A candidate must also have its parts there (`vision/parts.py`): the photo-model'
 fall into compact parts, and at most `max_absent_parts` of the model's parts may land on hue
 with fewer than half their points on a target hue — a crab's model squeezed onto a squid or a
 buoy of its colour matches on its body while its legs lie on water; foam over a creature leaves
-its parts without hue, which does not count against it.
+its parts without hue, which does not count against it. Of two or more absent parts none may lie
+on bare water (`vision/bare_parts.py`, `[estimator] bare_water_z`): a float or a leaf of the
+creature's one hue under its model leaves the model's arms on pixels of the water's own colour
+beside it, where a true creature's blurred arms leave a trace of the body's colour and another
+individual's displaced limb leaves one part.
 """
 
 from __future__ import annotations
@@ -70,6 +74,7 @@ import numpy as np
 
 from photoservo.geometry import rotation_from_heading_tilt
 from photoservo.vision.appearance import StereoGrey, appearance, body_layout, body_points
+from photoservo.vision.bare_parts import bare_parts
 from photoservo.vision.contour import (
     TARGET_FLAT,
     StereoChroma,
@@ -86,7 +91,7 @@ from photoservo.vision.fitness import (
     counts_reference,
     fitness,
 )
-from photoservo.vision.parts import absent_parts
+from photoservo.vision.parts import absent_parts, model_parts
 from photoservo.vision.photo_model import PhotoModel
 from photoservo.vision.pose_search import Candidate, aspect_map
 from photoservo.vision.rig import Rig
@@ -251,7 +256,7 @@ class Detection:
     where the background holds the target's hues in patches) — the creature's outline must end
     where the model's does (a buoy or another species of the same colour usually spills over).
     passed = contrast >= min_contrast and (outer_on_target <= max_outer_on_target or excused)
-             and not absent_parts > max_absent_parts,
+             and not absent_parts > max_absent_parts and not (absent >= 2 and bare_parts >= 1),
     excused = outer_on_target <= max_outer_if_appearance and appearance, body_layout >= min_appearance
     (`appearance_pair`; module docstring);
     confidence = logistic((contrast - min_contrast) / confidence_scale)
@@ -263,7 +268,9 @@ class Detection:
     elsewhere; candidates are ranked by it. `appearance`, `body_layout`: `appearance_pair` (nan
     when not measured). `absent_parts`: the share of the model's parts absent in the worse camera
     (`vision/parts.py`: of all its parts, those under foam are not absent; nan when no part lands
-    on hue)."""
+    on hue). `bare_parts`: how many of the absent parts lie on bare water in both cameras
+    (`vision/bare_parts.py`; 0 when not judged: no grey or chroma images, `bare_water_z` 0), with
+    `absent` the worse camera's count of absent parts (of two or more, none may be bare)."""
 
     score: float
     null_level: float
@@ -276,6 +283,7 @@ class Detection:
     appearance: float = math.nan
     body_layout: float = math.nan
     absent_parts: float = math.nan
+    bare_parts: int = 0
 
 
 def appearance_pair(c: Candidate, model: PhotoModel, frame: StereoHue, grey_frame: StereoGrey,
@@ -326,9 +334,15 @@ def detect(c: Candidate, model: PhotoModel, frame: StereoHue, rig: Rig, fit_para
     # an outline that spills is excused when the layout inside is the photo's by both cues (nan: no)
     excused = outer <= p.max_outer_if_appearance and bool(np.all(np.asarray(look) >= p.min_appearance))
     absent = absent_parts(c.R_model, c.position_mm, c.alpha, model, frame, rig, parts)
+    n_absent, bare = 0, 0  # parts on bare water (module docstring), judged from the pair's grey and chroma
+    if p.bare_water_z > 0 and grey_frame is not None and chroma is not None:
+        n_absent, bare = bare_parts(c.R_model, c.position_mm, c.alpha, model, frame, grey_frame, chroma, rig,
+                                    model_parts(model.inner_uv) if parts is None else parts, p.bare_water_z)
     passed = (contrast >= p.min_contrast and (outer <= p.max_outer_on_target or excused)
-              and not absent > p.max_absent_parts)  # nan (no part on hue): not a reason to reject
+              and not absent > p.max_absent_parts  # nan (no part on hue): not a reason to reject
+              and not (n_absent >= 2 and bare >= 1))
     outline = 1.0 if excused else 1.0 / (1.0 + math.exp(-(p.max_outer_on_target - outer) / 0.02))
     return Detection(score=score, null_level=q, contrast=contrast, outer_on_target=outer, passed=bool(passed),
                      confidence=confidence(contrast, p) * outline, threshold=q + p.min_contrast * (1.0 - q),
-                     standing=standing, appearance=look[0], body_layout=look[1], absent_parts=absent)
+                     standing=standing, appearance=look[0], body_layout=look[1], absent_parts=absent,
+                     bare_parts=bare)

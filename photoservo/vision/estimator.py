@@ -105,6 +105,8 @@ class EstimatorParams:
     max_outer_if_appearance: float  # ...or at most this share when both appearance cues reach min_appearance
     min_appearance: float  # appearance cues (vision/appearance.py) that excuse an outline spill
     max_absent_parts: float  # detection also needs at most this share of the model's parts absent (vision/parts.py)
+    bare_water_z: float  # ...and of two or more absent parts none on bare water within this many standard
+    # errors of the water's colour around the candidate (vision/bare_parts.py; 0 = off)
     outline_distinctive: bool  # an outer point on a target hue spills by how much more the creature holds of that
     # hue than the pair does (silhouette.distinctive_weight), not wholly (vision/detection.py)
     outline_grow: float  # when the first candidate fails, one failing its outline alone is tried grown by sqrt(this)
@@ -144,6 +146,7 @@ class EstimatorParams:
             ("island_turn_within", self.island_turn_within >= 0, "must be >= 0"),
             ("max_outer_if_appearance", 0.0 <= self.max_outer_if_appearance <= 1.0, "must be in [0, 1]"),
             ("max_absent_parts", 0.0 <= self.max_absent_parts <= 1.0, "must be in [0, 1]"),
+            ("bare_water_z", self.bare_water_z >= 0, "must be >= 0"),
             ("min_generations", 0 <= self.min_generations <= self.max_generations,
              "need 0 <= min_generations <= max_generations"),
             ("patience", self.patience >= 1, "must be >= 1"),
@@ -382,6 +385,7 @@ def _candidate_json(c: Candidate, d: Detection, model: PhotoModel) -> dict:
         "appearance": round(d.appearance, 4) if np.isfinite(d.appearance) else None,
         "body_layout": round(d.body_layout, 4) if np.isfinite(d.body_layout) else None,
         "absent_parts": round(d.absent_parts, 4) if np.isfinite(d.absent_parts) else None,
+        "bare_parts": int(d.bare_parts),
         "confidence": round(d.confidence, 4),
         "source": c.source,
     }

@@ -79,23 +79,42 @@ def model_parts(inner_uv: np.ndarray, n_parts: int = PARTS, iterations: int = 30
     return labels
 
 
+def absent_flags(hued: np.ndarray, on_target: np.ndarray, labels: np.ndarray) -> np.ndarray:
+    """(C, n_parts) bool: the parts absent in each camera (module docstring) from per-camera
+    (C, N_in) bool arrays `hued` (the point lands on a pixel with hue) and `on_target` (...on a
+    target hue) and the part `labels` (`model_parts`): counted (enough of its points on hue) and
+    fewer than half of those on a target hue."""
+    hued = np.atleast_2d(np.asarray(hued, bool))
+    agrees = np.atleast_2d(np.asarray(on_target, bool)) & hued
+    n = int(labels.max()) + 1 if len(labels) else 0
+    size = np.bincount(labels, minlength=n)
+    out = np.zeros((len(hued), n), bool)
+    for k, (h, a) in enumerate(zip(hued, agrees)):
+        nh = np.bincount(labels, weights=h, minlength=n)
+        na = np.bincount(labels, weights=a, minlength=n)
+        out[k] = counted(nh, size) & (na < 0.5 * nh)
+    return out
+
+
+def counted(nh: np.ndarray, size: np.ndarray) -> np.ndarray:
+    """(n_parts,) bool: the parts with enough of their `size` points on hue (`nh` of them) to judge."""
+    return (nh >= np.maximum(MIN_POINTS, MIN_HUED_SHARE * size)) & (size > 0)
+
+
 def absent_share(hued: np.ndarray, on_target: np.ndarray, labels: np.ndarray) -> float:
     """The share of parts absent (module docstring) from per-camera (C, N_in) bool arrays `hued`
     (the point lands on a pixel with hue) and `on_target` (...on a target hue) and the part
     `labels` (`model_parts`): the worse camera's absent parts over all of the model's parts (those
     without enough hue, under foam or glare, are not absent); nan when no camera counts a part."""
     hued = np.atleast_2d(np.asarray(hued, bool))
-    agrees = np.atleast_2d(np.asarray(on_target, bool)) & hued
     n = int(labels.max()) + 1 if len(labels) else 0
     size = np.bincount(labels, minlength=n)
+    flags = absent_flags(hued, on_target, labels)
     worst = math.nan
-    for h, a in zip(hued, agrees):
-        nh = np.bincount(labels, weights=h, minlength=n)
-        na = np.bincount(labels, weights=a, minlength=n)
-        counted = (nh >= np.maximum(MIN_POINTS, MIN_HUED_SHARE * size)) & (size > 0)
-        if not counted.any():
+    for h, f in zip(hued, flags):
+        if not counted(np.bincount(labels, weights=h, minlength=n), size).any():
             continue
-        share = float(np.count_nonzero(na[counted] < 0.5 * nh[counted])) / int(np.count_nonzero(size))
+        share = float(np.count_nonzero(f)) / int(np.count_nonzero(size))
         worst = share if math.isnan(worst) else max(worst, share)
     return worst
 

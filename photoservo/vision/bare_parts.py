@@ -1,0 +1,117 @@
+"""Is an absent part a limb the image does not show at all? The parts check's second look at
+what its absent parts land on, against the water around the candidate in the same image.
+
+The parts check (`vision/parts.py`) lets a candidate have a few of its photo-model's parts absent
+(`[estimator] max_absent_parts`, 2 of 12): a true creature loses parts there too. What a lost
+part lands on differs. A thin limb blurred into the water (a squid's arms at a few pixels across)
+leaves pixels between the water's colour and the body's; another individual's limb, lying
+elsewhere than the photo's, leaves the photo's limb on water, one part. A look-alike of one hue
+under a creature's model — a fishing float or a leaf under a squid's or a crab's model fitted
+small onto it (harbour nulls 1567, 1582, 1609, 1663, 1693: contrast 0.62-0.77, outline clean,
+2 of 12 parts absent) — leaves the model's thinnest parts, the arms, on bare water: pixels of the
+water's own colour, while the float's body holds the rest. (The float is drawn in the photo's
+mean hue, and every photo-model those nulls hold lies within one hue tolerance of one hue, so no
+hue layout tells the float from the creature.)
+
+Per camera the water's colour is read around the candidate itself — a per-frame null: the colour
+c = (grey, a*, b*) of the image at the outer points S_out that land on hue but not on a target hue
+(the water beside the model), their median w, and at the inner points on a target hue (the body)
+the median b. Every point's position along the line from the water's colour to the body's is
+
+    x = (c - w) · (b - w) / |b - w|^2          (0 the water, 1 the body)
+
+and s the spread (standard deviation) of x over the water's outer points. A part absent in a
+camera (the parts check's rule, `parts.absent_flags`) lies on bare water there when its points'
+mean x stands less than `z` standard errors above the water's,
+
+    mean x < z · s / sqrt(n),   n its points' distinct pixels,
+
+and on bare water when it does so in both cameras (a camera that sees it present, or cannot judge
+— under `MIN_WATER` water points or `MIN_BODY` body points, or a body no more than `MIN_SPAN`
+colour units from the water — says it is not bare). Detection (`vision/detection.py`) rejects a
+candidate with two or more parts absent of which any lies on bare water: one part on water is
+another individual's limb, two absent with a trace of colour a blurred pair of arms, two absent
+with one bare a model wider than what lies under it.
+
+Frames: poses as in `fitness` (R the model's linear map, t mm in the left camera frame, alpha
+px/mm); images: the pair's hue (`StereoHue`), grey (`appearance.StereoGrey`) and a*b* chroma
+(`contour.StereoChroma`).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from photoservo.vision.appearance import StereoGrey
+from photoservo.vision.contour import StereoChroma
+from photoservo.vision.fitness import StereoHue, project_model
+from photoservo.vision.parts import absent_flags
+from photoservo.vision.photo_model import HUE_BINS, PhotoModel
+from photoservo.vision.rig import Rig
+
+BARE_Z = 2.0  # standard errors: a part's mean colour position closer to the water's than this is bare water
+MIN_WATER = 8  # a camera judges only with at least this many water points (outer points off target hue)...
+MIN_BODY = 8  # ...and body points (inner points on target hue)...
+MIN_SPAN = 4.0  # ...and a body at least this far from the water in (grey, a*, b*) units
+
+
+def _colours(uv: np.ndarray, grey: np.ndarray, ab: np.ndarray, hue: np.ndarray
+             ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """At (N, 2) pixel coordinates (nearest pixel, as the fitness reads): the colour (N, 3)
+    (grey, a*, b*), the hue (N,) (NO_HUE outside the image), inside (N,) bool and the flat pixel
+    index (N,) (-1 outside)."""
+    H, W = hue.shape
+    with np.errstate(invalid="ignore"):
+        c = np.floor(uv + 0.5)
+        inside = (c[:, 0] >= 0) & (c[:, 0] < W) & (c[:, 1] >= 0) & (c[:, 1] < H)
+    ci = np.where(inside, c[:, 0], 0).astype(np.intp)
+    ri = np.where(inside, c[:, 1], 0).astype(np.intp)
+    col = np.column_stack([grey[ri, ci], ab[ri, ci, 0], ab[ri, ci, 1]]).astype(np.float64)
+    h = np.where(inside, hue[ri, ci], HUE_BINS).astype(np.int16)
+    return col, h, inside, np.where(inside, ri * W + ci, -1)
+
+
+def bare_flags(R: np.ndarray, t: np.ndarray, alpha: float, model: PhotoModel, frame: StereoHue,
+               grey_frame: StereoGrey, chroma: StereoChroma, rig: Rig, labels: np.ndarray,
+               z: float = BARE_Z) -> tuple[np.ndarray, np.ndarray]:
+    """One pose's parts (module docstring): (absent (2, n_parts) bool per camera, as the parts
+    check counts them; bare (n_parts,) bool, absent on bare water in both cameras). `labels`:
+    `parts.model_parts` of the model."""
+    p = project_model(R, t, alpha, model, rig)
+    n = int(labels.max()) + 1 if len(labels) else 0
+    target = np.zeros(HUE_BINS + 1, bool)
+    target[:HUE_BINS] = np.asarray(model.target_hues, bool)[:HUE_BINS]
+    absent = np.zeros((2, n), bool)
+    bare = np.zeros((2, n), bool)
+    views = ((p.inner_left[0], p.outer_left[0], frame.left, grey_frame.left, chroma.left),
+             (p.inner_right[0], p.outer_right[0], frame.right, grey_frame.right, chroma.right))
+    for k, (uv_in, uv_out, hue, grey, ab) in enumerate(views):
+        c_in, h_in, _, pix = _colours(uv_in, grey, ab, hue)
+        c_out, h_out, _, _ = _colours(uv_out, grey, ab, hue)
+        hued = h_in < HUE_BINS
+        on = hued & target[np.minimum(h_in, HUE_BINS)]
+        absent[k] = absent_flags(hued[None], on[None], labels)[0]
+        water = (h_out < HUE_BINS) & ~target[np.minimum(h_out, HUE_BINS)]
+        if not absent[k].any() or water.sum() < MIN_WATER or on.sum() < MIN_BODY:
+            continue
+        w = np.median(c_out[water], axis=0)
+        axis = np.median(c_in[on], axis=0) - w
+        span2 = float(axis @ axis)
+        if span2 < MIN_SPAN ** 2:
+            continue
+        x = (c_in - w) @ axis / span2
+        s = max(float(np.std((c_out[water] - w) @ axis / span2)), 1e-6)
+        for a in np.flatnonzero(absent[k]):
+            m = (labels == a) & (pix >= 0)
+            distinct = len(np.unique(pix[m]))
+            bare[k, a] = distinct > 0 and float(x[m].mean()) < z * s / np.sqrt(distinct)
+    return absent, bare[0] & bare[1]
+
+
+def bare_parts(R: np.ndarray, t: np.ndarray, alpha: float, model: PhotoModel, frame: StereoHue,
+               grey_frame: StereoGrey, chroma: StereoChroma, rig: Rig, labels: np.ndarray,
+               z: float = BARE_Z) -> tuple[int, int]:
+    """(absent, bare): the worse camera's count of absent parts and how many parts lie on bare
+    water in both cameras (`bare_flags`)."""
+    absent, bare = bare_flags(R, t, alpha, model, frame, grey_frame, chroma, rig, labels, z)
+    return int(absent.sum(axis=1).max()) if absent.size else 0, int(bare.sum())
