@@ -67,6 +67,7 @@ from photoservo.vision.genes import GeneSpace
 from photoservo.vision.pose_search import PoseSearch
 from photoservo.vision.fitness import stereo_hue
 from photoservo.vision.ga import paper_params
+from photoservo.vision.parts import PARTS
 from photoservo.vision.photo_model import build_photo_model
 from photoservo.geometry import heading_tilt_error
 from photoservo.sim import harbour
@@ -141,7 +142,8 @@ def miss_kind(row: dict, min_contrast: float, max_outer: float, max_absent: floa
     list: no candidate within 5 % of the distance from the truth (the seeds or the GA never got
     there), the best-standing candidate within 5 % rejected by detection (its contrast below
     min_contrast, its outline share above max_outer, more than max_absent of its parts absent:
-    vision/parts.py), or passing but ranked behind another."""
+    vision/parts.py, or two or more absent with one on bare water: vision/bare_parts.py), or
+    passing but ranked behind another."""
     if row["success"]:
         return None
     near = [c for c in row["candidates"] if c["off_pct"] <= 100 * SUCCESS_POS_FRAC]
@@ -151,7 +153,9 @@ def miss_kind(row: dict, min_contrast: float, max_outer: float, max_absent: floa
     if c["passed"]:
         return "within 5 %, passes, ranked behind another"
     why = [w for w, bad in (("contrast", c["contrast"] < min_contrast), ("outline", c["outer_on_target"] > max_outer),
-                            ("parts", (c.get("absent_parts") or 0.0) > max_absent)) if bad]
+                            ("parts", (c.get("absent_parts") or 0.0) > max_absent),
+                            ("parts on bare water", (c.get("bare_parts") or 0) >= 1
+                             and (c.get("absent_parts") or 0.0) * PARTS >= 2 - 1e-6)) if bad]
     return "within 5 %, rejected by " + " and ".join(why)
 
 
@@ -286,7 +290,8 @@ def main(argv: list[str] | None = None) -> int:
                  candidates=[{"off_pct": float(100 * np.linalg.norm(np.array(c["position_mm"]) - t_true) / t_true[2]),
                               "detection_score": c["detection_score"], "contrast": c["contrast"],
                               "outer_on_target": c["outer_on_target"], "standing": c["standing"],
-                              "absent_parts": c["absent_parts"], "passed": c["found"]}
+                              "absent_parts": c["absent_parts"], "bare_parts": c.get("bare_parts", 0),
+                              "passed": c["found"]}
                              for c in est.candidates])
         rows.append(r)
         print(f"  scene {i:3d} {r['kind']:<5} {'other' if other else 'same ':<5} z {r['distance_mm']:6.0f} "
