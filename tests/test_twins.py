@@ -44,9 +44,12 @@ def turned_scene():
 
 def run(turned_scene, twin_appearance: bool, max_absent_parts: float = CFG.estimator.max_absent_parts,
         island_turn_gain: float = CFG.estimator.island_turn_gain):
+    """estimate() of the scene; `max_absent_parts` 1 turns the parts check off, and with it its
+    bare-water rule (`bare_water_z` 0: vision/bare_parts.py judges the absent parts' pixels)."""
     sc, model = turned_scene
     p = dataclasses.replace(CFG.estimator, twin_appearance=twin_appearance, max_absent_parts=max_absent_parts,
-                            island_turn_gain=island_turn_gain)
+                            island_turn_gain=island_turn_gain,
+                            bare_water_z=0.0 if max_absent_parts >= 1.0 else CFG.estimator.bare_water_z)
     est = estimate(model, sc.left, sc.right, sc.rig, CFG.ga, p, CFG.fitness, seed=21)
     t = np.array(sc.truth["position_mm"])
     if not est.found:
