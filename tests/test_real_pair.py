@@ -391,3 +391,42 @@ def test_the_crate_cut_from_the_left_image_is_shrunk_before_it_is_turned_a_quart
                         lambda search, c, gain: shrunk(search, c, math.sqrt(CFG.estimator.contour_grow), gain))
     size[False] = _crate_size("left", 17)  # the quarter twins first (each still draws its own streams in turn)
     assert size[True] < 0.15 < 0.2 < size[False], size
+
+
+def test_a_fit_too_near_on_the_crate_is_slid_onto_it_not_ranked_last(monkeypatch):
+    """The crate cut from the right image, full size, estimator seeds 14 and 24: the leading island's fit
+    has its left image on the crate and its right image on another part of the red, 32 and 14 % too
+    near; `onto_surface` left it there when both images put the surface more than STEREO_DEPTH_TOL
+    further, and it ranked last (`same_surface_first`): the answer was a fit on the ridge inside the
+    crate (seed 14, 26 % small) or on another object (seed 24, 39 % off in depth). Slid onto the depth
+    both images see, it is the answer, on the crate, within 5 % in depth and 15 % in size."""
+    from photoservo.vision import candidates, estimator
+    from photoservo.vision.sampling import grey
+    from photoservo.vision.stereo_plane import STEREO_DEPTH_TOL, on_target_hue, onto_surface, stereo_depth_ratio
+
+    c, = real_cases(CFG.photo_model, targets=("crate",), variants=("right",))
+    tr, (x, y, w, h) = c.truth, c.truth["box_px"]
+
+    def answers():
+        out = []
+        for seed in (14, 24):
+            est = estimator.estimate(c.model, c.left, c.right, c.rig, CFG.ga, CFG.estimator, CFG.fitness, seed=seed)
+            if not est.found:
+                out.append((False, 1.0, 1.0))
+                continue
+            u, v = project_points(est.position_mm, c.rig.left)
+            out.append((x <= u <= x + w and y <= v <= y + h,
+                        abs(est.position_mm[2] / tr["distance_mm"] - 1),
+                        abs(tr["alpha_px_per_mm"] / est.alpha_px_per_mm - 1)))
+        return out
+
+    def within_tol(cand, search, left, right, tol):  # the slide as it was: only within STEREO_DEPTH_TOL
+        r = stereo_depth_ratio(cand.R_model, cand.position_mm, cand.alpha, search.model, grey(left), grey(right),
+                               search.rig, on_target=on_target_hue(search.model, search.frame.left), cluster=True)
+        return cand if abs(np.log(r)) > np.log(STEREO_DEPTH_TOL) else onto_surface(cand, search, left, right, tol)
+
+    slid = answers()
+    assert all(right and depth < 0.05 and size < 0.15 for right, depth, size in slid), slid
+    monkeypatch.setattr(candidates, "onto_surface", within_tol)
+    (right14, _, size14), (right24, depth24, _) = answers()
+    assert size14 > 0.2 and not (right24 and depth24 < 0.05), (size14, right24, depth24)

@@ -146,10 +146,15 @@ def onto_surface(c: Any, search: Any, left_bgr: np.ndarray, right_bgr: np.ndarra
     r: position r·t, alpha / r, the same left image), re-scored, and kept when its fitness is at most
     `tol` below c's: the hue fitness' depth comes from its points' parallax alone, which on a surface of
     one hue wider than the model is loose (the real pair over 12 seeds: 5-11 % off in depth in 9 of 108
-    runs, 0-4.7 % at the depth both images see). `c` as it is without evidence, or r beyond STEREO_DEPTH_TOL."""
+    runs, 0-4.7 % at the depth both images see). Also beyond STEREO_DEPTH_TOL (a pose "pairing two
+    surfaces", `pairs_other_surfaces`), within the ratio's span: a fit whose left image lies on the target
+    and whose right image lies on another part of its hues, 14-32 % too near (the crate cut from the right
+    image, seeds 14, 20, 24; from the left image, seed 32), was left there and ranked last, behind fits on
+    the crate's ridge or on another object; slid, it lies within 0.5-2.5 % of the crate's depth at
+    0.83-0.93. `c` as it is without evidence."""
     r = stereo_depth_ratio(c.R_model, c.position_mm, c.alpha, search.model, grey(left_bgr), grey(right_bgr),
                            search.rig, on_target=on_target_hue(search.model, search.frame.left), cluster=True)
-    if not np.isfinite(r) or abs(np.log(r)) > np.log(STEREO_DEPTH_TOL) or r == 1.0:
+    if not np.isfinite(r) or r == 1.0:
         return c
     t, alpha = r * np.asarray(c.position_mm), c.alpha / r
     f = float(fitness(c.R_model[None], t[None], np.array([alpha]), search.model, search.frame, search.rig,
