@@ -26,8 +26,8 @@ from photoservo.vision.photo_model import PhotoModel
 from photoservo.vision.pose_search import Candidate, PoseSearch
 from photoservo.vision.rig import Rig
 from photoservo.vision.sampling import grey
-from photoservo.vision.stereo_plane import (STEREO_DEPTH_TOL, on_target_hue, onto_surface, pairs_other_surfaces,
-                                             stereo_depth_ratio)
+from photoservo.vision.stereo_plane import (STEREO_DEPTH_TOL, PlaneFit, fit_target_plane, on_target_hue, onto_surface,
+                                             pairs_other_surfaces, stereo_depth_ratio)
 from photoservo.vision.twins import reflected_rotation, turned_about_centroid
 
 if TYPE_CHECKING:
@@ -104,19 +104,96 @@ def stereo_depth(first: tuple[Detection, Candidate], search: PoseSearch, left_bg
     d, c = first
     if not d.passed:
         return first
-    r = stereo_depth_ratio(c.R_model, c.position_mm, c.alpha, search.model, grey(left_bgr), grey(right_bgr),
-                           search.rig, on_target=on_target_hue(search.model, search.frame.left))
-    if not (np.isfinite(r) and math.log(STEREO_DEPTH_MIN) < abs(math.log(r)) <= math.log(STEREO_DEPTH_TOL)):
-        return first
-    t = yield from search.local_steps(c.R, r * np.asarray(c.position_mm), c.alpha / r, position_frac=0.03,
-                                      heading_deg=15.0, tilt_deg=15.0, alpha_frac=0.08,
-                                      rng=np.random.default_rng(stream))
-    t = yield from aspect_refined(search, dataclasses.replace(t, source=c.source), p)
-    t = dataclasses.replace(t, generations=search.ga.generation)
-    if not t.fitness > c.fitness:
+    t = yield from at_stereo_depth(search, c, left_bgr, right_bgr, np.random.default_rng(stream), p)
+    if t is None or not t.fitness > c.fitness:
         return first
     d_t = detect(t, search.model, search.frame, search.rig, search.fit_params, p, seed=seed, **looks)
     return (d_t, t) if d_t.passed else first
+
+
+def at_stereo_depth(search: PoseSearch, c: Candidate, left_bgr: np.ndarray, right_bgr: np.ndarray,
+                    rng: np.random.Generator, p: EstimatorParams) -> Generator[int, None, Candidate | None]:
+    """`c` searched again at the depth both images see under it (`stereo_plane.stereo_depth_ratio` r, more
+    than STEREO_DEPTH_MIN and at most STEREO_DEPTH_TOL off): slid along its line of sight to r t, alpha / r,
+    re-fitted by a short GA in the twins' window (random stream `rng`) and per axis (`aspect_refined`);
+    None where the two images see it at its depth or say nothing (`stereo_depth`, `plane_turned`)."""
+    r = stereo_depth_ratio(c.R_model, c.position_mm, c.alpha, search.model, grey(left_bgr), grey(right_bgr),
+                           search.rig, on_target=on_target_hue(search.model, search.frame.left))
+    if not (np.isfinite(r) and math.log(STEREO_DEPTH_MIN) < abs(math.log(r)) <= math.log(STEREO_DEPTH_TOL)):
+        return None
+    t = yield from search.local_steps(c.R, r * np.asarray(c.position_mm), c.alpha / r, position_frac=0.03,
+                                      heading_deg=15.0, tilt_deg=15.0, alpha_frac=0.08, rng=rng)
+    t = yield from aspect_refined(search, dataclasses.replace(t, source=c.source), p)
+    return dataclasses.replace(t, generations=search.ga.generation)
+
+
+# a first candidate whose normal lies more than this (deg) from the stereo plane under it (the lead island's re-fit
+# on that plane in a narrow window vetoed by the hue fitness) is searched again on the plane in a window following
+# the turn (`stereo_tilt`, `plane_turned`)
+PLANE_TURN_MIN_DEG = 20.0
+# ...and that re-fit is the stereo pair's when the plane re-measured under it lies within this (deg) of its normal
+PLANE_AGREE_DEG = 10.0
+
+
+def stereo_tilt(first: tuple[Detection, Candidate], search: PoseSearch, left_bgr: np.ndarray, right_bgr: np.ndarray,
+                looks: dict, p: EstimatorParams, seed: int = 0) -> Generator[int, None, tuple[Detection, Candidate]]:
+    """The first candidate, when it passes detection, turned onto the plane both images see under it where it
+    contradicts that plane (`plane_turned`); the result replaces it when it passes detection too (`looks`: what
+    `detect` reads of the pair), so whether anything is found stays as it was: turned in the leading island's
+    refinements (`refined`) instead, a look-alike's fit on a buoy (renderer null 1531, 25 % of its parts absent)
+    fitted better on the buoy's plane with fewer parts absent and passed. One generation per step."""
+    d, c = first
+    if not d.passed:
+        return first
+    t = yield from plane_turned(search, c, left_bgr, right_bgr, p)
+    if t is c:
+        return first
+    t = dataclasses.replace(t, source=c.source, generations=search.ga.generation)
+    d_t = detect(t, search.model, search.frame, search.rig, search.fit_params, p, seed=seed, **looks)
+    return (d_t, t) if d_t.passed else first
+
+
+def plane_turned(search: PoseSearch, c: Candidate, left_bgr: np.ndarray, right_bgr: np.ndarray,
+                 p: EstimatorParams) -> Generator[int, None, Candidate]:
+    """Where hue bounds the target, a fit whose tilt the stereo plane under it contradicts by more than
+    PLANE_TURN_MIN_DEG (for the leading island's, after the hue fitness vetoed its narrow re-fit on that
+    plane: `PoseSearch.tilt_steps`, heading and scale held near): turned onto the plane and re-fitted in a
+    window that follows the turn (as `stereo_islands`) and per axis (`aspect_refined`), then at the depth
+    both images see under the re-fit (`at_stereo_depth`),
+    each kept when its hue fitness is at most `plane_fitness_tol` below the fit it replaces, and the whole
+    kept only when the stereo pair agrees with the result: the plane re-measured under it within
+    PLANE_AGREE_DEG of its normal (a plane measured on glints, foam or a small far creature moves with the
+    pose it is measured under; the creature's own does not). The hue fitness alone prefers a wrong tilt on
+    some creatures: renderer 1146's fish (tilted 24 deg) fitted 30 deg off at 0.764 (the truth 0.711), 6.3 %
+    off, its plane 25 deg from the fit and 6 deg from the truth (re-fitted on it with heading and scale held
+    near, 0.66 or less); turned and followed, 0.792, 7 deg and 3.4 % off, its plane re-measured 1.3 deg from
+    it. A plane measured on glints beside a small far squid (renderer 1138, 60 deg from the fit, 87 from the
+    truth) leaves a re-fit below the tolerance. Own random streams (`Generator.spawn`): where nothing is
+    kept, the search goes on as before. `c` as it is otherwise. One generation per step."""
+    if not p.plane_refine or not np.isfinite(c.fitness):
+        return c
+    on_target = on_target_hue(search.model, search.frame.left)
+    gl, gr = grey(left_bgr), grey(right_bgr)
+    plane = fit_target_plane(c.R, c.position_mm, c.alpha, search.model, gl, gr, search.rig, on_target=on_target)
+    if plane is None or _off_plane_deg(c, plane) <= PLANE_TURN_MIN_DEG:
+        return c
+    turn_rng, depth_rng = search.ga.rng.spawn(2)  # own streams: where nothing is kept, the search goes on as before
+    t = yield from search.tilt_steps(c, left_bgr, right_bgr, follow=True, rng=turn_rng)
+    if t is c:
+        return c
+    t = yield from aspect_refined(search, t, p)
+    d = yield from at_stereo_depth(search, t, left_bgr, right_bgr, depth_rng, p)
+    if d is not None and d.fitness >= t.fitness - p.plane_fitness_tol:
+        t = d
+    if t.fitness < c.fitness - p.plane_fitness_tol:
+        return c
+    plane = fit_target_plane(t.R, t.position_mm, t.alpha, search.model, gl, gr, search.rig, on_target=on_target)
+    return t if plane is not None and _off_plane_deg(t, plane) <= PLANE_AGREE_DEG else c
+
+
+def _off_plane_deg(c: Candidate, plane: PlaneFit) -> float:
+    """The angle (deg) between the candidate's model normal and the plane's (either side)."""
+    return math.degrees(math.acos(min(1.0, abs(float(np.asarray(c.R)[:, 2] @ plane.normal)))))
 
 
 # a first candidate whose depth lies more than this factor from where both images put the surface under it is

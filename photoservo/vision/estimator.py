@@ -22,7 +22,8 @@ while the creature itself stands out more: then the creature is the estimate, or
 unless it fails and one that passes stands nearly as high (`candidates.ranked`). When the first
 still fails after its head-to-tail twin was tried, each candidate that fails its outline test
 alone is tried grown (`candidates.grown_outlines`: a fit shrunk inside the creature spills onto
-the creature itself). Where hue bounds the target, a first candidate that passes is searched again at
+the creature itself). Where hue bounds the target, a first candidate that passes is searched again on
+the plane both images see under it where its tilt contradicts that plane (`candidates.stereo_tilt`), and at
 the depth both images see under it (`candidates.stereo_depth`).
 
 When the target's hues cover most of the pair (a many-hued creature in water of one of its hues;
@@ -44,7 +45,7 @@ import numpy as np
 from photoservo.errors import InputError
 from photoservo.vision.appearance import stereo_grey, stereo_value
 from photoservo.vision.candidates import (appearance_twin, grown_outlines, ranked, refined, same_surface_first,
-                                          stereo_depth, stereo_islands, turned_islands)
+                                          stereo_depth, stereo_islands, stereo_tilt, turned_islands)
 from photoservo.vision.contour import stereo_chroma
 from photoservo.vision.detection import Detection, detect
 from photoservo.vision.fitness import FitnessParams, StereoHue, stereo_hue
@@ -322,9 +323,10 @@ def acquisition(model: PhotoModel, left_bgr: np.ndarray, right_bgr: np.ndarray, 
                                                 looks["parts"], looks["chroma"], looks["weight"])
     if p.outline_grow > 1.0 and results and not results[0][0].passed:  # after the twin: it draws from the islands' rng
         results = yield from grown_outlines(results, dict(islands), looks, p, seed)
-    if frame.chroma is None and results:  # where hue bounds the target: the answer at the depth both images see
-        results[0] = yield from stereo_depth(results[0], dict(islands)[results[0][1].source], left_bgr, right_bgr,
-                                             ss.spawn(1)[0], looks, p, seed)
+    if frame.chroma is None and results:  # where hue bounds the target: the answer on the plane and at the depth
+        search = dict(islands)[results[0][1].source]  # both images see
+        results[0] = yield from stereo_tilt(results[0], search, left_bgr, right_bgr, looks, p, seed)
+        results[0] = yield from stereo_depth(results[0], search, left_bgr, right_bgr, ss.spawn(1)[0], looks, p, seed)
     return Acquired(results, islands)
 
 
