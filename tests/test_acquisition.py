@@ -372,6 +372,21 @@ def test_a_fit_tilted_off_the_plane_both_images_see_is_searched_again_there():
     assert heading_tilt_error(np.array(sc.truth["rotation"]), est.rotation)[1] < 10.0
 
 
+def test_a_fit_the_hue_fitness_scores_as_the_truth_goes_where_both_images_see_it():
+    """Held-out harbour scene 1120 of benchmarks/accuracy.py (same photo): the squid fitted 6.6 % off and 41 deg
+    off in tilt scores as its truth (0.741 against 0.737); both images put the surface under it 6 % nearer,
+    where the re-fit scores 0.714, 0.4 % off. Within `plane_fitness_tol` of the hue fitness' choice the stereo
+    pair decides (`candidates.stereo_depth`): found within 5 % of the distance."""
+    from photoservo.sim import harbour
+
+    sc = harbour.random_scene(1120, CFG.synthetic, CFG.photo_model, kind="squid")
+    model = build_photo_model(sc.photo, CFG.photo_model)
+    est = estimate(model, sc.left, sc.right, sc.rig, CFG.ga, CFG.estimator, CFG.fitness, seed=120)
+    t = np.array(sc.truth["position_mm"])
+    assert est.found
+    assert np.linalg.norm(est.position_mm - t) < 0.05 * t[2]
+
+
 def test_a_plane_measured_on_glints_does_not_turn_the_fit():
     """Held-out renderer scene 1138 (same photo): a small squid 950 mm away among glints, fitted 35 deg off in
     tilt (0.741). The stereo plane under the fit lies 60 deg from it and 87 deg from the truth (matches on

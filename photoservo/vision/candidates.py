@@ -94,18 +94,22 @@ def stereo_depth(first: tuple[Detection, Candidate], search: PoseSearch, left_bg
     """The first candidate, when it passes detection, searched again at the depth both images see under
     it (`stereo_plane.stereo_depth_ratio` r, more than STEREO_DEPTH_MIN and at most STEREO_DEPTH_TOL
     off): slid along its line of sight to r t, alpha / r, re-fitted by a short GA in the twins' window
-    (on its own random stream `stream`) and per axis (`aspect_refined`); the re-fit replaces it when it
-    fits better and passes detection too (`looks`: what `detect` reads of the pair), so whether anything
-    is found stays as it was. An island's GA ends on one of the hue fitness' many near-equal peaks (12
-    random streams of harbour 1029's island end at 0.69-0.77), and one off in depth is one the two
-    images disagree with: 1029's fish fitted 6.3 % off (0.749), 7.5 % nearer than both images put it,
-    slid and re-fitted 0.77, within 1 %. Only on a candidate that passes: a look-alike fitted better at
-    its own depth passes more often (harbour null 1573). One generation per step."""
+    (on its own random stream `stream`) and per axis (`aspect_refined`: `at_stereo_depth`); the re-fit
+    replaces it when its hue fitness is at most `plane_fitness_tol` below c's (the stereo pair decides
+    between fits the hue fitness scores near alike, as for the plane's tilt: `PoseSearch.tilt_steps`) and
+    it passes detection too (`looks`: what `detect` reads of the pair), so whether anything is found stays
+    as it was. An island's GA ends on one of the hue fitness' many near-equal peaks (12 random streams of
+    harbour 1029's island end at 0.69-0.77), and one off in depth is one the two images disagree with:
+    1029's fish fitted 6.3 % off (0.749), 7.5 % nearer than both images put it, slid and re-fitted 0.77,
+    within 1 %; harbour 1120's squid, fitted 6.6 % off and 41 deg off in tilt (0.741; the truth 0.737),
+    re-fitted where both images put it 0.714, 0.4 % off (kept only when fitting better, it stayed off).
+    Only on a candidate that passes: a look-alike fitted better at its own depth passes more often
+    (harbour null 1573). One generation per step."""
     d, c = first
     if not d.passed:
         return first
     t = yield from at_stereo_depth(search, c, left_bgr, right_bgr, np.random.default_rng(stream), p)
-    if t is None or not t.fitness > c.fitness:
+    if t is None or t.fitness < c.fitness - p.plane_fitness_tol:
         return first
     d_t = detect(t, search.model, search.frame, search.rig, search.fit_params, p, seed=seed, **looks)
     return (d_t, t) if d_t.passed else first
