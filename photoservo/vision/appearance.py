@@ -46,7 +46,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from photoservo.vision.fitness import StereoHue
+from photoservo.vision.fitness import StereoHue, nearest_pixel
 from photoservo.vision.photo_model import HUE_BINS, PhotoModel
 from photoservo.vision.rig import Rig, project_points
 from photoservo.vision.sampling import brightness, grey, image_values, sampling_pitch
@@ -92,11 +92,8 @@ def correlation(a: np.ndarray, b: np.ndarray) -> float:
 def on_target(uv: np.ndarray, hue: np.ndarray, target_hues: np.ndarray) -> np.ndarray:
     """Image points uv (N, 2) px whose nearest pixel carries one of the target's hues (bool (N,);
     False outside the image or on a pixel without hue)."""
-    H, W = hue.shape
-    with np.errstate(invalid="ignore"):
-        c = np.floor(np.nan_to_num(uv, nan=-1.0) + 0.5)
-    inside = (c[:, 0] >= 0) & (c[:, 0] < W) & (c[:, 1] >= 0) & (c[:, 1] < H)
-    h = hue[np.where(inside, c[:, 1], 0).astype(np.intp), np.where(inside, c[:, 0], 0).astype(np.intp)]
+    ri, ci, inside = nearest_pixel(uv, hue.shape)
+    h = hue[ri, ci]
     lut = np.zeros(256, bool)
     lut[:HUE_BINS] = np.asarray(target_hues, bool)
     return inside & lut[h]

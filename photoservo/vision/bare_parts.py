@@ -44,7 +44,7 @@ import numpy as np
 
 from photoservo.vision.appearance import StereoGrey
 from photoservo.vision.contour import StereoChroma
-from photoservo.vision.fitness import StereoHue, project_model
+from photoservo.vision.fitness import StereoHue, nearest_pixel, project_model
 from photoservo.vision.parts import absent_flags
 from photoservo.vision.photo_model import HUE_BINS, PhotoModel
 from photoservo.vision.rig import Rig
@@ -57,15 +57,11 @@ MIN_SPAN = 4.0  # ...and a body at least this far from the water in (grey, a*, b
 
 def _colours(uv: np.ndarray, grey: np.ndarray, ab: np.ndarray, hue: np.ndarray
              ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """At (N, 2) pixel coordinates (nearest pixel, as the fitness reads): the colour (N, 3)
-    (grey, a*, b*), the hue (N,) (NO_HUE outside the image), inside (N,) bool and the flat pixel
-    index (N,) (-1 outside)."""
-    H, W = hue.shape
-    with np.errstate(invalid="ignore"):
-        c = np.floor(uv + 0.5)
-        inside = (c[:, 0] >= 0) & (c[:, 0] < W) & (c[:, 1] >= 0) & (c[:, 1] < H)
-    ci = np.where(inside, c[:, 0], 0).astype(np.intp)
-    ri = np.where(inside, c[:, 1], 0).astype(np.intp)
+    """At (N, 2) pixel coordinates (nearest pixel, as the fitness reads: `fitness.nearest_pixel`):
+    the colour (N, 3) (grey, a*, b*), the hue (N,) (NO_HUE outside the image), inside (N,) bool and
+    the flat pixel index (N,) (-1 outside)."""
+    W = hue.shape[1]
+    ri, ci, inside = nearest_pixel(uv, hue.shape)
     col = np.column_stack([grey[ri, ci], ab[ri, ci, 0], ab[ri, ci, 1]]).astype(np.float64)
     h = np.where(inside, hue[ri, ci], HUE_BINS).astype(np.int16)
     return col, h, inside, np.where(inside, ri * W + ci, -1)

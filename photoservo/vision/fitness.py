@@ -182,15 +182,24 @@ def project_model(R: np.ndarray, t: np.ndarray, alpha: np.ndarray, model: PhotoM
     return ModelProjection(inner_left=il, outer_left=ol, inner_right=ir, outer_right=orr)
 
 
-def _sample(uv: np.ndarray, hue: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Nearest-pixel hue at (P, N, 2) pixel coordinates: (hue (P,N) int, inside (P,N) bool).
-    Pixel centres are at integer coordinates (OpenCV): pixel k covers [k - 0.5, k + 0.5)."""
-    Hh, Ww = hue.shape
+def nearest_pixel(uv: np.ndarray, shape: tuple[int, ...]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The nearest pixel to (..., 2) pixel coordinates in an image of `shape` (H, W, ...), as the
+    fitness reads it: (row, column, inside), rows and columns (...) intp, 0 where the point falls
+    outside the image or is not finite (inside False). Pixel centres are at integer coordinates
+    (OpenCV): pixel k covers [k - 0.5, k + 0.5)."""
+    Hh, Ww = shape[:2]
     with np.errstate(invalid="ignore"):
         c = np.floor(uv + 0.5)
         inside = (c[..., 0] >= 0) & (c[..., 0] < Ww) & (c[..., 1] >= 0) & (c[..., 1] < Hh)
     ci = np.where(inside, c[..., 0], 0).astype(np.intp)
     ri = np.where(inside, c[..., 1], 0).astype(np.intp)
+    return ri, ci, inside
+
+
+def _sample(uv: np.ndarray, hue: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Nearest-pixel hue at (P, N, 2) pixel coordinates: (hue (P,N) int, inside (P,N) bool)
+    (`nearest_pixel`)."""
+    ri, ci, inside = nearest_pixel(uv, hue.shape)
     return hue[ri, ci].astype(np.int16), inside
 
 
