@@ -1,6 +1,7 @@
-"""robot/clock.py's `lower_priority`: the session's work that can wait steps back, the loops that
-must hold their period (kept ids) do not. Run in a child process: niceness cannot be lowered
-again without privilege, so the test process itself must not be touched."""
+"""robot/clock.py: `lower_priority` (the session's work that can wait steps back, the loops that
+must hold their period, kept ids, do not; run in a child process: niceness cannot be lowered
+again without privilege, so the test process itself must not be touched) and `freeze_heap`
+(the control loop's collections leave the imported libraries alone)."""
 
 import json
 import subprocess
@@ -36,3 +37,22 @@ def test_lower_priority_nices_this_process_and_its_children_but_not_the_kept_one
     assert got["main"] == got["worker"] == got["other"] == base + 5, got
     assert got["kept"] == base, got
     assert got["done"].startswith(f"nice {base + 5} for ") and "of 2 processes" in got["done"], got
+
+
+def test_freeze_heap_leaves_the_loops_collections_only_what_it_allocates_since():
+    """The control process freezes what it imported before its loop (robot/clock.freeze_heap):
+    a full collection then scans only the objects made since, not numpy's and numba's."""
+    import gc
+
+    from photoservo.robot.clock import freeze_heap
+
+    try:
+        frozen = freeze_heap()
+        assert frozen == gc.get_freeze_count() > 10_000  # pytest, numpy, photoservo: all frozen
+        since = [[k] for k in range(100)]  # the loop's own allocations
+        tracked = len(gc.get_objects())  # what a full collection would scan now
+        assert 100 <= tracked < frozen // 20, (tracked, frozen)
+        assert since[0] in gc.get_objects()
+    finally:
+        gc.unfreeze()
+    assert gc.get_freeze_count() == 0

@@ -19,7 +19,8 @@ import numpy as np
 from photoservo.config import Config
 from photoservo.robot import pa10
 from photoservo.robot.arm import JointHistory
-from photoservo.robot.clock import Rate, ignore_stop_signals, lower_priority, raise_priority, set_realtime, start_child
+from photoservo.robot.clock import (Rate, freeze_heap, ignore_stop_signals, lower_priority, raise_priority, set_realtime,
+                                    start_child)
 from photoservo.servo.scores import Scores, Truth
 from photoservo.servo.session import (ARM_LOG_EVERY, ControlLoop, Frame, Status, StatusFn, Tick, control_tick,
                                       controller_for, log_tick, vision_step)
@@ -83,6 +84,8 @@ def control_process(job: ControlJob, conn, stop) -> None:
     warm_kinematics()  # loaded from numba's cache (the session's warm start compiled it) before the first period
     cfg = job.cfg
     c = ControlLoop(controller_for(cfg, job.rig, job.collect), None, Scores(settle_s=cfg.servo.settle_s), job.truth, job.t0)
+    frozen = freeze_heap()  # before the link and the arm: no full collection over the imported libraries in the loop
+    c.ctrl.events.append((time.monotonic(), f"control process heap: {frozen} objects frozen before the loop"))
     realtime = False
     try:
         if job.rt_priority is not None:
