@@ -141,13 +141,14 @@ def lower_priority(nice: int, keep: set[int] | frozenset[int] = frozenset()) -> 
 
 
 def freeze_heap() -> int:
-    """For a loop that must hold its period (the control process): one full garbage collection
+    """For a loop that must hold its period (the control process; the vision loop too): one full garbage collection
     now, then every object alive moved out of the collector's reach (`gc.freeze`), so that the
     loop's own collections scan only what it allocates since. Without it the first full
     collection after the start (gen 2, over the ~110k objects that numpy, numba and the link
     import) came 1-2 s into a session and took 45-60 ms on this 2-core machine: 12-15 control
-    periods without a setpoint, and the bridge's 3-period watchdog stopped the arm. Returns the
-    number of objects frozen."""
+    periods without a setpoint, and the bridge's 3-period watchdog stopped the arm. In the vision
+    process (~149k objects) they took 65-110 ms, 2-3 frames. Returns the number of objects
+    frozen."""
     gc.collect()
     gc.freeze()
     return gc.get_freeze_count()

@@ -274,6 +274,7 @@ def run_realtime(cfg: Config, duration_s: float, *, port: str, read_frame: Calla
     events: list[tuple[float, str]] = []
     try:
         control.wait_ready()
+        freeze_heap()  # the warm start's and the libraries' objects: no full collection over them per frame
         events += control.step_back(keep_ids)
         if t0 is None:  # the clock starts now: the arm is enabled, the kernels are warm
             t0 = start_clock() if start_clock is not None else time.monotonic()
