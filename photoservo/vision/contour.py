@@ -211,6 +211,17 @@ def contour_cases(R: np.ndarray, t: np.ndarray, alpha: np.ndarray, model: PhotoM
     return tuple(np.stack(x, axis=1) for x in zip(*cams))  # type: ignore[return-value]
 
 
+def judged_share(R: np.ndarray, t: np.ndarray, alpha: float, model: PhotoModel, frame: StereoHue,
+                 chroma: StereoChroma, rig: Rig, params: FitnessParams) -> np.ndarray:
+    """(2,): per camera, the share of ONE pose's outer points the contour rule judges (both points of
+    the pair inside the image and at least MIN_GAP_PX apart: `contour_cases`). A fit a few pixels
+    long has none: every outer point on a target hue then costs as under the paper's rule, and no
+    outer point can show the outline (vision/detection.py). R (3, 3), t (3,) mm, alpha px/mm."""
+    _, _, judged, _ = contour_cases(np.asarray(R)[None], np.asarray(t, float)[None], np.array([float(alpha)]),
+                                    model, frame, chroma, rig, params)
+    return judged[0].mean(axis=-1) if judged.shape[-1] else np.zeros(2)
+
+
 def _on_target(h: np.ndarray, model: PhotoModel) -> np.ndarray:
     """Which hue values h (any shape; NO_HUE and the other values >= HUE_BINS: none) are target hues."""
     return (h < HUE_BINS) & np.asarray(model.target_hues, bool)[np.minimum(h, HUE_BINS - 1)]

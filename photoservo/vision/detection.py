@@ -61,6 +61,15 @@ on bare water (`vision/bare_parts.py`, `[estimator] bare_water_z`): a float or a
 creature's one hue under its model leaves the model's arms on pixels of the water's own colour
 beside it, where a true creature's blurred arms leave a trace of the body's colour and another
 individual's displaced limb leaves one part.
+
+Where the contour rule bounds the target (`frame.chroma`: the target's hues everywhere), the outline
+is seen only through the outer points it judges: those at least `contour.MIN_GAP_PX` from their inner
+neighbour in the image. A fit a few pixels long has none judged, so nothing spills and nothing shows
+its outline either: its score is its inner points on their hues, which any spot of the creature's
+colour gives at that size (harbour null 1812: a fish's model 14 px long on a leaf on water of the
+fish's hues, contrast 0.51, outline 0 of 0). Such a candidate passes only when the rule judges at
+least `MIN_JUDGED_SHARE` of its outer points in both cameras — not a size threshold of one generator
+but the outline test's own condition for saying anything.
 """
 
 from __future__ import annotations
@@ -80,6 +89,7 @@ from photoservo.vision.contour import (
     StereoChroma,
     contour_counts,
     contour_counts_reference,
+    judged_share,
     outline_spill,
     outline_spill_reference,
 )
@@ -114,6 +124,11 @@ WIDE_PLACEMENTS = 320
 OUTLINE_NULL_QUANTILE = 0.9
 # batches of 8 x placements random origins `null_scores` draws at most to find its placements
 NULL_DRAW_BATCHES = 16
+# where the contour rule bounds the target, the least share of a candidate's outer points it must
+# judge in each camera (`contour.judged_share`) for the outline to have been seen at all (module
+# docstring). Harbour null 1812: a fish's model fitted 14 px long on a leaf, 0 judged; the answers
+# of the contour-regime targets (harbour, many-hued fish, the real pair's 54 runs) 0.31-1.0
+MIN_JUDGED_SHARE = 0.1
 
 
 def confidence(contrast: float, params: EstimatorParams) -> float:
@@ -256,7 +271,8 @@ class Detection:
     where the background holds the target's hues in patches) — the creature's outline must end
     where the model's does (a buoy or another species of the same colour usually spills over).
     passed = contrast >= min_contrast and (outer_on_target <= max_outer_on_target or excused)
-             and not absent_parts > max_absent_parts and not (absent >= 2 and bare_parts >= 1),
+             and not absent_parts > max_absent_parts and not (absent >= 2 and bare_parts >= 1)
+             and not outline_judged < MIN_JUDGED_SHARE,
     excused = outer_on_target <= max_outer_if_appearance and appearance, body_layout >= min_appearance
     (`appearance_pair`; module docstring);
     confidence = logistic((contrast - min_contrast) / confidence_scale)
@@ -270,7 +286,10 @@ class Detection:
     (`vision/parts.py`: of all its parts, those under foam are not absent; nan when no part lands
     on hue). `bare_parts`: how many of the absent parts lie on bare water in both cameras
     (`vision/bare_parts.py`; 0 when not judged: no grey or chroma images, `bare_water_z` 0), with
-    `absent` the worse camera's count of absent parts (of two or more, none may be bare)."""
+    `absent` the worse camera's count of absent parts (of two or more, none may be bare).
+    `outline_judged`: where the contour rule bounds the target, the worse camera's share of outer
+    points it judges (`contour.judged_share`; nan elsewhere): below `MIN_JUDGED_SHARE` the outline was
+    not seen and the candidate does not pass (module docstring)."""
 
     score: float
     null_level: float
@@ -284,6 +303,7 @@ class Detection:
     body_layout: float = math.nan
     absent_parts: float = math.nan
     bare_parts: int = 0
+    outline_judged: float = math.nan
 
 
 def appearance_pair(c: Candidate, model: PhotoModel, frame: StereoHue, grey_frame: StereoGrey,
@@ -338,11 +358,15 @@ def detect(c: Candidate, model: PhotoModel, frame: StereoHue, rig: Rig, fit_para
     if p.bare_water_z > 0 and grey_frame is not None and chroma is not None:
         n_absent, bare = bare_parts(c.R_model, c.position_mm, c.alpha, model, frame, grey_frame, chroma, rig,
                                     model_parts(model.inner_uv) if parts is None else parts, p.bare_water_z)
+    # where the contour rule bounds the target: how much of the outline it could judge (module docstring)
+    judged = (float(judged_share(c.R_model, c.position_mm, c.alpha, model, frame, frame.chroma, rig, fit_params).min())
+              if frame.chroma is not None else math.nan)
     passed = (contrast >= p.min_contrast and (outer <= p.max_outer_on_target or excused)
               and not absent > p.max_absent_parts  # nan (no part on hue): not a reason to reject
-              and not (n_absent >= 2 and bare >= 1))
+              and not (n_absent >= 2 and bare >= 1)
+              and not judged < MIN_JUDGED_SHARE)  # nan (the hue regime): not judged
     outline = 1.0 if excused else 1.0 / (1.0 + math.exp(-(p.max_outer_on_target - outer) / 0.02))
     return Detection(score=score, null_level=q, contrast=contrast, outer_on_target=outer, passed=bool(passed),
                      confidence=confidence(contrast, p) * outline, threshold=q + p.min_contrast * (1.0 - q),
                      standing=standing, appearance=look[0], body_layout=look[1], absent_parts=absent,
-                     bare_parts=bare)
+                     bare_parts=bare, outline_judged=judged)
