@@ -53,6 +53,7 @@ BARE_Z = 2.0  # standard errors: a part's mean colour position closer to the wat
 MIN_WATER = 8  # a camera judges only with at least this many water points (outer points off target hue)...
 MIN_BODY = 8  # ...and body points (inner points on target hue)...
 MIN_SPAN = 4.0  # ...and a body at least this far from the water in (grey, a*, b*) units
+WATER_STRIDE = 7  # `water_chroma` reads every this-th pixel of the water
 
 
 def _colours(uv: np.ndarray, grey: np.ndarray, ab: np.ndarray, hue: np.ndarray
@@ -111,3 +112,37 @@ def bare_parts(R: np.ndarray, t: np.ndarray, alpha: float, model: PhotoModel, fr
     water in both cameras (`bare_flags`)."""
     absent, bare = bare_flags(R, t, alpha, model, frame, grey_frame, chroma, rig, labels, z)
     return int(absent.sum(axis=1).max()) if absent.size else 0, int(bare.sum())
+
+
+
+def water_chroma(hue: np.ndarray, ab: np.ndarray, target: np.ndarray) -> np.ndarray:
+    """(2,) the image's water colour: the median a*, b* over its pixels on hue but off the target's
+    hues (`target`, (HUE_BINS + 1,) bool; every `WATER_STRIDE`-th such pixel)."""
+    h = hue.ravel()
+    m = (h < HUE_BINS) & ~target[np.minimum(h, HUE_BINS)]
+    px = ab.reshape(-1, 2)[m][::WATER_STRIDE] if m.any() else np.zeros((0, 2), np.uint8)
+    return np.median(px.astype(np.float64), axis=0) if len(px) else np.full(2, np.nan)
+
+
+def off_water(R: np.ndarray, t: np.ndarray, alpha: float, model: PhotoModel, frame: StereoHue,
+              chroma: StereoChroma, rig: Rig, edge: float) -> np.ndarray:
+    """(2,) per camera: the share of ONE pose's outer points S_out that land on hue, off the target's
+    hues, and more than `edge` a*b* units (a colour edge: `[fitness] contour_chroma`) from the
+    image's water colour (`water_chroma`): on another object, not on the water. A model shrunk
+    inside a larger object of another kind (renderer null 1849: a squid's model on a fish's brown
+    band) has its outline there; a creature's lies on water, foam or glints (no hue)."""
+    p = project_model(R, t, alpha, model, rig)
+    target = np.zeros(HUE_BINS + 1, bool)
+    target[:HUE_BINS] = np.asarray(model.target_hues, bool)[:HUE_BINS]
+    out = np.zeros(2)
+    for k, (uv_out, hue, ab) in enumerate(((p.outer_left[0], frame.left, chroma.left),
+                                           (p.outer_right[0], frame.right, chroma.right))):
+        if not len(uv_out):
+            continue
+        ri, ci, ok = nearest_pixel(uv_out, hue.shape)
+        h = np.where(ok, hue[ri, ci], HUE_BINS).astype(np.int16)
+        col = ab[ri, ci].astype(np.float64)
+        off = (h < HUE_BINS) & ~target[np.minimum(h, HUE_BINS)]
+        far = np.linalg.norm(col - water_chroma(hue, ab, target), axis=1) > edge
+        out[k] = float((off & far).sum()) / len(uv_out)
+    return out

@@ -70,6 +70,14 @@ colour gives at that size (harbour null 1812: a fish's model 14 px long on a lea
 fish's hues, contrast 0.51, outline 0 of 0). Such a candidate passes only when the rule judges at
 least `MIN_JUDGED_SHARE` of its outer points in both cameras — not a size threshold of one generator
 but the outline test's own condition for saying anything.
+
+Where hue bounds the target, a candidate's outline must lie on the water (or on what carries no hue:
+foam, glints), not on another object: at most `MAX_OFF_WATER` of its outer points (in the camera
+with fewer) may land on hue, off the target's hues and a colour edge (`[fitness] contour_chroma`)
+away from the image's own water colour, the median a*b* of its pixels off the target's hues
+(`bare_parts.off_water`). A model shrunk inside a larger object of another kind whose colour it
+partly shares (renderer null 1849: a squid's model on a fish's brown band, outline on the fish's
+yellow and green) passes the outline test, whose spill counts target hues only.
 """
 
 from __future__ import annotations
@@ -83,7 +91,7 @@ import numpy as np
 
 from photoservo.geometry import rotation_from_heading_tilt
 from photoservo.vision.appearance import StereoGrey, appearance, body_layout, body_points
-from photoservo.vision.bare_parts import bare_parts
+from photoservo.vision.bare_parts import bare_parts, off_water
 from photoservo.vision.contour import (
     TARGET_FLAT,
     StereoChroma,
@@ -129,6 +137,12 @@ NULL_DRAW_BATCHES = 16
 # docstring). Harbour null 1812: a fish's model fitted 14 px long on a leaf, 0 judged; the answers
 # of the contour-regime targets (harbour, many-hued fish, the real pair's 54 runs) 0.31-1.0
 MIN_JUDGED_SHARE = 0.1
+# where hue bounds the target, the largest share of a candidate's outer points (in the camera with
+# fewer) that may lie on another object: on hue, off the target's hues and a colour edge away from
+# the image's water (`bare_parts.off_water`). Renderer null 1849 (a squid's model inside a fish's
+# brown band) 0.31 and 0.36; every candidate that passes in the target scenes of tuned, held-out 1
+# and 2 on both generators <= 0.14
+MAX_OFF_WATER = 0.25
 
 
 def confidence(contrast: float, params: EstimatorParams) -> float:
@@ -272,7 +286,7 @@ class Detection:
     where the model's does (a buoy or another species of the same colour usually spills over).
     passed = contrast >= min_contrast and (outer_on_target <= max_outer_on_target or excused)
              and not absent_parts > max_absent_parts and not (absent >= 2 and bare_parts >= 1)
-             and not outline_judged < MIN_JUDGED_SHARE,
+             and not outline_judged < MIN_JUDGED_SHARE and not off_water > MAX_OFF_WATER,
     excused = outer_on_target <= max_outer_if_appearance and appearance, body_layout >= min_appearance
     (`appearance_pair`; module docstring);
     confidence = logistic((contrast - min_contrast) / confidence_scale)
@@ -289,7 +303,9 @@ class Detection:
     `absent` the worse camera's count of absent parts (of two or more, none may be bare).
     `outline_judged`: where the contour rule bounds the target, the worse camera's share of outer
     points it judges (`contour.judged_share`; nan elsewhere): below `MIN_JUDGED_SHARE` the outline was
-    not seen and the candidate does not pass (module docstring)."""
+    not seen and the candidate does not pass (module docstring). `off_water`: where hue bounds the
+    target, the smaller camera's share of outer points on another object (`bare_parts.off_water`;
+    nan elsewhere), at most `MAX_OFF_WATER` to pass."""
 
     score: float
     null_level: float
@@ -304,6 +320,7 @@ class Detection:
     absent_parts: float = math.nan
     bare_parts: int = 0
     outline_judged: float = math.nan
+    off_water: float = math.nan
 
 
 def appearance_pair(c: Candidate, model: PhotoModel, frame: StereoHue, grey_frame: StereoGrey,
@@ -361,12 +378,18 @@ def detect(c: Candidate, model: PhotoModel, frame: StereoHue, rig: Rig, fit_para
     # where the contour rule bounds the target: how much of the outline it could judge (module docstring)
     judged = (float(judged_share(c.R_model, c.position_mm, c.alpha, model, frame, frame.chroma, rig, fit_params).min())
               if frame.chroma is not None else math.nan)
+    # where hue bounds the target: how much of the outline lies on another object (module docstring)
+    elsewhere = (float(off_water(c.R_model, c.position_mm, c.alpha, model, frame, chroma, rig,
+                                 fit_params.contour_chroma).min()) if frame.chroma is None and chroma is not None
+                 else math.nan)
     passed = (contrast >= p.min_contrast and (outer <= p.max_outer_on_target or excused)
               and not absent > p.max_absent_parts  # nan (no part on hue): not a reason to reject
               and not (n_absent >= 2 and bare >= 1)
-              and not judged < MIN_JUDGED_SHARE)  # nan (the hue regime): not judged
+              and not judged < MIN_JUDGED_SHARE  # nan (the hue regime): not judged
+              and not elsewhere > MAX_OFF_WATER)  # nan (the contour regime, no chroma): not judged
     outline = 1.0 if excused else 1.0 / (1.0 + math.exp(-(p.max_outer_on_target - outer) / 0.02))
     return Detection(score=score, null_level=q, contrast=contrast, outer_on_target=outer, passed=bool(passed),
                      confidence=confidence(contrast, p) * outline, threshold=q + p.min_contrast * (1.0 - q),
                      standing=standing, appearance=look[0], body_layout=look[1], absent_parts=absent,
-                     bare_parts=bare, outline_judged=judged)
+                     bare_parts=bare, outline_judged=judged,
+                     off_water=elsewhere)

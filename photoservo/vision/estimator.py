@@ -389,6 +389,7 @@ def _candidate_json(c: Candidate, d: Detection, model: PhotoModel) -> dict:
         "absent_parts": round(d.absent_parts, 4) if np.isfinite(d.absent_parts) else None,
         "bare_parts": int(d.bare_parts),
         "outline_judged": round(d.outline_judged, 4) if np.isfinite(d.outline_judged) else None,
+        "off_water": round(d.off_water, 4) if np.isfinite(d.off_water) else None,
         "confidence": round(d.confidence, 4),
         "source": c.source,
     }
