@@ -118,22 +118,36 @@ def bare_parts(R: np.ndarray, t: np.ndarray, alpha: float, model: PhotoModel, fr
 def water_chroma(hue: np.ndarray, ab: np.ndarray, target: np.ndarray) -> np.ndarray:
     """(2,) the image's water colour: the median a*, b* over its pixels on hue but off the target's
     hues (`target`, (HUE_BINS + 1,) bool; every `WATER_STRIDE`-th such pixel)."""
-    h = hue.ravel()
-    m = (h < HUE_BINS) & ~target[np.minimum(h, HUE_BINS)]
-    px = ab.reshape(-1, 2)[m][::WATER_STRIDE] if m.any() else np.zeros((0, 2), np.uint8)
+    water = ~target[np.minimum(hue.ravel(), HUE_BINS)]  # NO_HUE maps past the table's last entry, a target
+    water[hue.ravel() >= HUE_BINS] = False
+    px = ab.reshape(-1, 2)[np.flatnonzero(water)[::WATER_STRIDE]]
     return np.median(px.astype(np.float64), axis=0) if len(px) else np.full(2, np.nan)
 
 
+def _target_lut(model: PhotoModel) -> np.ndarray:
+    """(HUE_BINS + 1,) bool: which hue values (NO_HUE and above: none) are the model's target hues."""
+    target = np.zeros(HUE_BINS + 1, bool)
+    target[:HUE_BINS] = np.asarray(model.target_hues, bool)[:HUE_BINS]
+    return target
+
+
+def stereo_water(model: PhotoModel, frame: StereoHue, chroma: StereoChroma) -> np.ndarray:
+    """(2, 2): `water_chroma` of the left and right image (rows) for `off_water`, read once per pair."""
+    target = _target_lut(model)
+    return np.stack([water_chroma(frame.left, chroma.left, target), water_chroma(frame.right, chroma.right, target)])
+
+
 def off_water(R: np.ndarray, t: np.ndarray, alpha: float, model: PhotoModel, frame: StereoHue,
-              chroma: StereoChroma, rig: Rig, edge: float) -> np.ndarray:
+              chroma: StereoChroma, rig: Rig, edge: float, water: np.ndarray | None = None) -> np.ndarray:
     """(2,) per camera: the share of ONE pose's outer points S_out that land on hue, off the target's
     hues, and more than `edge` a*b* units (a colour edge: `[fitness] contour_chroma`) from the
     image's water colour (`water_chroma`): on another object, not on the water. A model shrunk
     inside a larger object of another kind (renderer null 1849: a squid's model on a fish's brown
-    band) has its outline there; a creature's lies on water, foam or glints (no hue)."""
+    band) has its outline there; a creature's lies on water, foam or glints (no hue). `water`: the
+    pair's `stereo_water` (computed when None)."""
     p = project_model(R, t, alpha, model, rig)
-    target = np.zeros(HUE_BINS + 1, bool)
-    target[:HUE_BINS] = np.asarray(model.target_hues, bool)[:HUE_BINS]
+    target = _target_lut(model)
+    water = stereo_water(model, frame, chroma) if water is None else water
     out = np.zeros(2)
     for k, (uv_out, hue, ab) in enumerate(((p.outer_left[0], frame.left, chroma.left),
                                            (p.outer_right[0], frame.right, chroma.right))):
@@ -143,6 +157,6 @@ def off_water(R: np.ndarray, t: np.ndarray, alpha: float, model: PhotoModel, fra
         h = np.where(ok, hue[ri, ci], HUE_BINS).astype(np.int16)
         col = ab[ri, ci].astype(np.float64)
         off = (h < HUE_BINS) & ~target[np.minimum(h, HUE_BINS)]
-        far = np.linalg.norm(col - water_chroma(hue, ab, target), axis=1) > edge
+        far = np.linalg.norm(col - water[k], axis=1) > edge
         out[k] = float((off & far).sum()) / len(uv_out)
     return out

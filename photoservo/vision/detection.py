@@ -337,14 +337,16 @@ def appearance_pair(c: Candidate, model: PhotoModel, frame: StereoHue, grey_fram
 def detect(c: Candidate, model: PhotoModel, frame: StereoHue, rig: Rig, fit_params: FitnessParams,
            p: EstimatorParams, seed: int = 0, grey_frame: StereoGrey | None = None,
            value_frame: StereoGrey | None = None, parts: np.ndarray | None = None,
-           chroma: StereoChroma | None = None, weight: np.ndarray | None = None) -> Detection:
+           chroma: StereoChroma | None = None, weight: np.ndarray | None = None,
+           water: np.ndarray | None = None) -> Detection:
     """The detection test of one candidate (see `Detection`); `seed` draws the null placements;
     `grey_frame` / `value_frame` (`appearance.stereo_grey` / `stereo_value` of the pair): the
     appearance cues that may excuse an outline spill (module docstring; without them, none);
     `parts`: the model's `parts.model_parts` (computed when None); `chroma`
     (`contour.stereo_chroma` of the pair): the distinctive outline (module docstring; without it,
     every outer point on a target hue spills wholly), with `weight` its hues' lookup
-    (`silhouette.distinctive_weight` of the pair; computed when None)."""
+    (`silhouette.distinctive_weight` of the pair; computed when None); `water`: the pair's water colour
+    (`bare_parts.stereo_water`; computed when None), for the outline on another object."""
     strict = dataclasses.replace(fit_params, combine="min")
     score = float(fitness(c.R_model, c.position_mm, c.alpha, model, frame, rig, strict)[0])
     rng = np.random.default_rng(seed)
@@ -380,7 +382,7 @@ def detect(c: Candidate, model: PhotoModel, frame: StereoHue, rig: Rig, fit_para
               if frame.chroma is not None else math.nan)
     # where hue bounds the target: how much of the outline lies on another object (module docstring)
     elsewhere = (float(off_water(c.R_model, c.position_mm, c.alpha, model, frame, chroma, rig,
-                                 fit_params.contour_chroma).min()) if frame.chroma is None and chroma is not None
+                                 fit_params.contour_chroma, water).min()) if frame.chroma is None and chroma is not None
                  else math.nan)
     passed = (contrast >= p.min_contrast and (outer <= p.max_outer_on_target or excused)
               and not absent > p.max_absent_parts  # nan (no part on hue): not a reason to reject

@@ -44,6 +44,7 @@ import numpy as np
 
 from photoservo.errors import InputError
 from photoservo.vision.appearance import stereo_grey, stereo_value
+from photoservo.vision.bare_parts import stereo_water
 from photoservo.vision.candidates import (appearance_twin, grown_outlines, ranked, refined, same_surface_first,
                                           stereo_depth, stereo_islands, stereo_tilt, turned_islands)
 from photoservo.vision.contour import stereo_chroma
@@ -303,6 +304,8 @@ def acquisition(model: PhotoModel, left_bgr: np.ndarray, right_bgr: np.ndarray, 
                  parts=parts, chroma=frame.chroma or stereo_chroma(left_bgr, right_bgr),
                  weight=(distinctive_weight(frame.left, frame.right, model)
                          if p.outline_distinctive and frame.chroma is None else None))
+    # the water's colour in each image, for detection's outline on another object (where hue bounds the target)
+    looks["water"] = stereo_water(model, frame, looks["chroma"]) if frame.chroma is None else None
     if provisional is not None and len(islands) == 1 and np.isfinite(firsts[0].fitness):
         provisional.append((detect(firsts[0], model, frame, rig, fit_params, p, seed=seed, **looks),
                             dataclasses.replace(firsts[0], source=islands[0][0])))
