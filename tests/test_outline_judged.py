@@ -53,11 +53,11 @@ def test_a_fit_too_small_for_its_outline_to_be_judged_is_not_found_on_empty_wate
 
 
 def test_a_many_hued_fish_the_contour_rule_can_judge_is_found():
+    # benchmarks/accuracy.py --many-hued: fish 0 (seed 1700), estimated with seed 0, within 5 % of its depth
     sc, model = _harbour(1700, kind="fish", many_hued=True)
     est = estimate(model, sc.left, sc.right, sc.rig, CFG.ga, P, CFG.fitness, seed=0)
-    assert est.found
-    truth = np.array(sc.truth["position_mm"])
-    assert np.linalg.norm(np.array(est.position_mm) - truth) / truth[2] < 0.05
+    off = np.array(est.position_mm if est.found else np.full(3, np.inf)) - sc.truth["position_mm"]
+    assert np.linalg.norm(off) < 0.05 * sc.truth["position_mm"][2]
     assert est.candidates[0]["outline_judged"] >= 0.3
 
 
