@@ -16,7 +16,7 @@ import pytest
 from photoservo.config import load_config
 from photoservo.sim import harbour
 from photoservo.vision.contour import contour_cases, outline_spill, outline_spill_reference, stereo_chroma
-from photoservo.vision.detection import OutlineCues, detect, outer_share
+from photoservo.vision.detection import MAX_OFF_WATER, OutlineCues, detect, outer_share
 from photoservo.vision.estimator import estimate
 from photoservo.vision.fitness import stereo_hue
 from photoservo.vision.photo_model import HUE_BINS, build_photo_model
@@ -86,7 +86,10 @@ def test_the_compiled_spill_is_the_reference(fish_on_water):
 def test_the_distinctive_outline_changes_the_outline_only(fish_on_water):
     sc, model, frame, cues, truth = fish_on_water
     d_whole = detect(truth, model, frame, sc.rig, CFG.fitness, CFG.estimator)  # no chroma: each point counts 1
-    assert d_whole == detect(truth, model, frame, sc.rig, CFG.fitness, WHOLE, chroma=cues.chroma)
+    # with the chroma, the outline on another object is read too (nan without): the rest is the same
+    d_chroma = detect(truth, model, frame, sc.rig, CFG.fitness, WHOLE, chroma=cues.chroma)
+    assert d_chroma.off_water <= MAX_OFF_WATER
+    assert d_whole == dataclasses.replace(d_chroma, off_water=d_whole.off_water)
     d = detect(truth, model, frame, sc.rig, CFG.fitness, CFG.estimator, chroma=cues.chroma)
     assert (d.score, d.contrast, d.standing) == (d_whole.score, d_whole.contrast, d_whole.standing)
     assert d.outer_on_target < d_whole.outer_on_target
