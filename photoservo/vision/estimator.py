@@ -46,7 +46,7 @@ from photoservo.errors import InputError
 from photoservo.vision.appearance import stereo_grey, stereo_value
 from photoservo.vision.bare_parts import stereo_water
 from photoservo.vision.candidates import (appearance_twin, grown_outlines, ranked, refined, same_surface_first,
-                                          stereo_depth, stereo_islands, stereo_tilt, turned_islands)
+                                          scaled_plane, stereo_depth, stereo_islands, stereo_tilt, turned_islands)
 from photoservo.vision.contour import stereo_chroma
 from photoservo.vision.detection import Detection, detect
 from photoservo.vision.fitness import FitnessParams, StereoHue, stereo_hue
@@ -330,6 +330,8 @@ def acquisition(model: PhotoModel, left_bgr: np.ndarray, right_bgr: np.ndarray, 
         search = dict(islands)[results[0][1].source]  # both images see
         results[0] = yield from stereo_tilt(results[0], search, left_bgr, right_bgr, looks, p, seed)
         results[0] = yield from stereo_depth(results[0], search, left_bgr, right_bgr, ss.spawn(1)[0], looks, p, seed)
+        if p.plane_refine:
+            results[0] = scaled_plane(results[0], search, left_bgr, right_bgr, p)
     return Acquired(results, islands)
 
 
