@@ -5,6 +5,8 @@ under a foam band (parts without hue) and a brighter, darker or colour-cast copy
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -12,9 +14,9 @@ from photoservo.config import load_config
 from photoservo.sim.scenes import EFFECTS, random_scene
 from photoservo.vision.detection import detect
 from photoservo.vision.estimator import estimate
-from photoservo.vision.fitness import inner_hues, stereo_hue
-from photoservo.vision.parts import PARTS, absent_parts, absent_share, model_parts
-from photoservo.vision.photo_model import HUE_BINS, build_photo_model
+from photoservo.vision.fitness import StereoHue, inner_hues, stereo_hue
+from photoservo.vision.parts import FOAM, PARTS, absent_flags, absent_parts, absent_share, foam_marked, model_parts
+from photoservo.vision.photo_model import HUE_BINS, NO_HUE, build_photo_model
 from photoservo.vision.pose_search import Candidate
 
 CFG = load_config()
@@ -104,11 +106,16 @@ def test_another_individual_under_foam_with_its_arm_tips_elsewhere_is_found():
     """Renderer scene 1009 of the accuracy benchmark: a squid from another individual's photo, a
     foam band over a third of it; the model's two arm tips (a few hued points each) lie where that
     individual held them, on water. Counted over the parts with hue (8 of 12 in one camera) that
-    was 2 of 8 absent and the squid was not found; over the model's 12 parts it is 2 of 12."""
+    was 2 of 8 absent and the squid was not found; over the model's 12 parts it is 2 of 12. (The
+    parts at the band are not judged at all where they straddle its foam, `foam_part_share`: the
+    count over all parts is checked with every part judged.)"""
     sc, model = _scene(1009, kind="squid", other_photo=True, split=True)
-    est = estimate(model, sc.left, sc.right, sc.rig, CFG.ga, CFG.estimator, CFG.fitness, seed=9)
-    assert est.found
     t = np.array(sc.truth["position_mm"])
+    est = estimate(model, sc.left, sc.right, sc.rig, CFG.ga, CFG.estimator, CFG.fitness, seed=9)
+    assert est.found and np.linalg.norm(est.position_mm - t) <= 0.05 * t[2]
+    est = estimate(model, sc.left, sc.right, sc.rig, CFG.ga, dataclasses.replace(P, foam_part_share=1.0), CFG.fitness,
+                   seed=9)
+    assert est.found
     assert np.linalg.norm(est.position_mm - t) <= 0.05 * t[2]
     best = est.candidates[0]
     assert 0.0 < best["absent_parts"] <= P.max_absent_parts
@@ -119,3 +126,45 @@ def test_another_individual_under_foam_with_its_arm_tips_elsewhere_is_found():
     labels = model_parts(model.inner_uv)
     hued_parts = [len(np.unique(labels[(row < HUE_BINS)])) for row in h]
     assert min(hued_parts) < PARTS  # the foam leaves parts without hue: they do not count against it
+
+
+def test_foam_is_marked_and_a_part_straddling_it_is_not_judged():
+    """`foam_marked`: patches of pixels without hue at least as bright as the image's hued median
+    are FOAM (shadow, darker, and a one-pixel pale rim stay NO_HUE); a part with `foam_share` of
+    its points on foam is not absent however few of its hued points are on a target hue
+    (`absent_flags`)."""
+    hue = np.full((40, 60), 100, np.uint8)  # water's hue
+    value = np.full((40, 60), 120.0, np.float32)
+    hue[:, 28:32], value[:, 28:32] = NO_HUE, 240.0  # a white foam band
+    hue[5:8, 5:8], value[5:8, 5:8] = NO_HUE, 20.0  # a shadow
+    hue[20, 2:20], value[20, 2:20] = NO_HUE, 160.0  # a pale rim, one pixel wide
+    frame = StereoHue(left=hue, right=hue.copy())
+    marked = foam_marked(frame, value, value)
+    for h in (marked.left, marked.right):
+        assert np.all(h[:, 28:32] == FOAM) and np.all(h[5:8, 5:8] == NO_HUE) and np.all(h[20, 2:20] == NO_HUE)
+        assert np.count_nonzero(h == 100) == np.count_nonzero(hue == 100)
+    assert np.array_equal(frame.left, hue)  # the pair itself is untouched
+    labels = np.repeat([0, 1], 10)
+    hued = np.ones((1, 20), bool)
+    hued[0, 7:10] = False  # part 0: 3 of its 10 points on foam, its 7 hued ones off target
+    on = np.zeros((1, 20), bool)
+    on[0, 10:] = True
+    foam = ~hued
+    assert absent_flags(hued, on, labels).tolist() == [[True, False]]
+    assert absent_flags(hued, on, labels, foam, 0.2).tolist() == [[False, False]]
+    assert absent_flags(hued, on, labels, foam, 0.4).tolist() == [[True, False]]
+
+
+def test_a_split_squid_with_a_part_at_the_band_edge_is_found():
+    """Renderer held-out scene 1234 of the accuracy benchmark (`--first-scene 200`): a squid cut by
+    a foam band, same photo. The GA's best slides along the body (5.7 % off, parts on water) and
+    the islands near the truth (1.7-1.8 %) had 2-3 of 12 parts absent, one of them straddling the
+    band's pale edge (the bare-water rule then rejects two absent with one bare): not found. With
+    the parts on foam unjudged (`[estimator] foam_part_share`) a fit within 2 % passes."""
+    sc, model = _scene(1234, kind="squid", split=True)
+    est = estimate(model, sc.left, sc.right, sc.rig, CFG.ga, CFG.estimator, CFG.fitness, seed=234)
+    t = np.array(sc.truth["position_mm"])
+    assert est.found and np.linalg.norm(est.position_mm - t) <= 0.02 * t[2]
+    off = estimate(model, sc.left, sc.right, sc.rig, CFG.ga, dataclasses.replace(P, foam_part_share=1.0),
+                   CFG.fitness, seed=234)
+    assert not off.found

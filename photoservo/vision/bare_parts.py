@@ -45,7 +45,7 @@ import numpy as np
 from photoservo.vision.appearance import StereoGrey
 from photoservo.vision.contour import StereoChroma
 from photoservo.vision.fitness import StereoHue, nearest_pixel, project_model
-from photoservo.vision.parts import absent_flags
+from photoservo.vision.parts import FOAM, absent_flags
 from photoservo.vision.photo_model import HUE_BINS, PhotoModel
 from photoservo.vision.rig import Rig
 
@@ -70,9 +70,10 @@ def _colours(uv: np.ndarray, grey: np.ndarray, ab: np.ndarray, hue: np.ndarray
 
 def bare_flags(R: np.ndarray, t: np.ndarray, alpha: float, model: PhotoModel, frame: StereoHue,
                grey_frame: StereoGrey, chroma: StereoChroma, rig: Rig, labels: np.ndarray,
-               z: float = BARE_Z) -> tuple[np.ndarray, np.ndarray]:
+               z: float = BARE_Z, foam_share: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
     """One pose's parts (module docstring): (absent (2, n_parts) bool per camera, as the parts
-    check counts them; bare (n_parts,) bool, absent on bare water in both cameras). `labels`:
+    check counts them, `foam_share` as there (`parts.absent_flags`); bare (n_parts,) bool, absent
+    on bare water in both cameras). `labels`:
     `parts.model_parts` of the model."""
     p = project_model(R, t, alpha, model, rig)
     n = int(labels.max()) + 1 if len(labels) else 0
@@ -87,7 +88,7 @@ def bare_flags(R: np.ndarray, t: np.ndarray, alpha: float, model: PhotoModel, fr
         c_out, h_out, _, _ = _colours(uv_out, grey, ab, hue)
         hued = h_in < HUE_BINS
         on = hued & target[np.minimum(h_in, HUE_BINS)]
-        absent[k] = absent_flags(hued[None], on[None], labels)[0]
+        absent[k] = absent_flags(hued[None], on[None], labels, (h_in == FOAM)[None], foam_share)[0]
         water = (h_out < HUE_BINS) & ~target[np.minimum(h_out, HUE_BINS)]
         if not absent[k].any() or water.sum() < MIN_WATER or on.sum() < MIN_BODY:
             continue
@@ -107,10 +108,10 @@ def bare_flags(R: np.ndarray, t: np.ndarray, alpha: float, model: PhotoModel, fr
 
 def bare_parts(R: np.ndarray, t: np.ndarray, alpha: float, model: PhotoModel, frame: StereoHue,
                grey_frame: StereoGrey, chroma: StereoChroma, rig: Rig, labels: np.ndarray,
-               z: float = BARE_Z) -> tuple[int, int]:
+               z: float = BARE_Z, foam_share: float = 1.0) -> tuple[int, int]:
     """(absent, bare): the worse camera's count of absent parts and how many parts lie on bare
     water in both cameras (`bare_flags`)."""
-    absent, bare = bare_flags(R, t, alpha, model, frame, grey_frame, chroma, rig, labels, z)
+    absent, bare = bare_flags(R, t, alpha, model, frame, grey_frame, chroma, rig, labels, z, foam_share)
     return int(absent.sum(axis=1).max()) if absent.size else 0, int(bare.sum())
 
 

@@ -56,11 +56,12 @@ A candidate must also have its parts there (`vision/parts.py`): the photo-model'
 fall into compact parts, and at most `max_absent_parts` of the model's parts may land on hue
 with fewer than half their points on a target hue — a crab's model squeezed onto a squid or a
 buoy of its colour matches on its body while its legs lie on water; foam over a creature leaves
-its parts without hue, which does not count against it. Of two or more absent parts none may lie
-on bare water (`vision/bare_parts.py`, `[estimator] bare_water_z`): a float or a leaf of the
-creature's one hue under its model leaves the model's arms on pixels of the water's own colour
-beside it, where a true creature's blurred arms leave a trace of the body's colour and another
-individual's displaced limb leaves one part.
+its parts without hue, which does not count against it, nor does a part straddling a foam band's
+pale, blurred edge (`parts.foam_marked`, `[estimator] foam_part_share`). Of two or more absent
+parts none may lie on bare water (`vision/bare_parts.py`, `[estimator] bare_water_z`): a float or
+a leaf of the creature's one hue under its model leaves the model's arms on pixels of the water's
+own colour beside it, where a true creature's blurred arms leave a trace of the body's colour and
+another individual's displaced limb leaves one part.
 
 Where the contour rule bounds the target (`frame.chroma`: the target's hues everywhere), the outline
 is seen only through the outer points it judges: those at least `contour.MIN_GAP_PX` from their inner
@@ -338,7 +339,7 @@ def detect(c: Candidate, model: PhotoModel, frame: StereoHue, rig: Rig, fit_para
            p: EstimatorParams, seed: int = 0, grey_frame: StereoGrey | None = None,
            value_frame: StereoGrey | None = None, parts: np.ndarray | None = None,
            chroma: StereoChroma | None = None, weight: np.ndarray | None = None,
-           water: np.ndarray | None = None) -> Detection:
+           water: np.ndarray | None = None, foam: StereoHue | None = None) -> Detection:
     """The detection test of one candidate (see `Detection`); `seed` draws the null placements;
     `grey_frame` / `value_frame` (`appearance.stereo_grey` / `stereo_value` of the pair): the
     appearance cues that may excuse an outline spill (module docstring; without them, none);
@@ -346,7 +347,10 @@ def detect(c: Candidate, model: PhotoModel, frame: StereoHue, rig: Rig, fit_para
     (`contour.stereo_chroma` of the pair): the distinctive outline (module docstring; without it,
     every outer point on a target hue spills wholly), with `weight` its hues' lookup
     (`silhouette.distinctive_weight` of the pair; computed when None); `water`: the pair's water colour
-    (`bare_parts.stereo_water`; computed when None), for the outline on another object."""
+    (`bare_parts.stereo_water`; computed when None), for the outline on another object; `foam`: the
+    pair's hue with its foam marked (`parts.foam_marked`), which the parts check and the bare-water
+    rule read instead of `frame`: a part with `foam_part_share` of its points on foam is not judged
+    (module docstring)."""
     strict = dataclasses.replace(fit_params, combine="min")
     score = float(fitness(c.R_model, c.position_mm, c.alpha, model, frame, rig, strict)[0])
     rng = np.random.default_rng(seed)
@@ -372,11 +376,13 @@ def detect(c: Candidate, model: PhotoModel, frame: StereoHue, rig: Rig, fit_para
         look = appearance_pair(c, model, frame, grey_frame, value_frame, rig)
     # an outline that spills is excused when the layout inside is the photo's by both cues (nan: no)
     excused = outer <= p.max_outer_if_appearance and bool(np.all(np.asarray(look) >= p.min_appearance))
-    absent = absent_parts(c.R_model, c.position_mm, c.alpha, model, frame, rig, parts)
+    parts_frame = frame if foam is None else foam  # a part straddling foam is not judged (vision/parts.py)
+    absent = absent_parts(c.R_model, c.position_mm, c.alpha, model, parts_frame, rig, parts, p.foam_part_share)
     n_absent, bare = 0, 0  # parts on bare water (module docstring), judged from the pair's grey and chroma
     if p.bare_water_z > 0 and grey_frame is not None and chroma is not None:
-        n_absent, bare = bare_parts(c.R_model, c.position_mm, c.alpha, model, frame, grey_frame, chroma, rig,
-                                    model_parts(model.inner_uv) if parts is None else parts, p.bare_water_z)
+        n_absent, bare = bare_parts(c.R_model, c.position_mm, c.alpha, model, parts_frame, grey_frame, chroma, rig,
+                                    model_parts(model.inner_uv) if parts is None else parts, p.bare_water_z,
+                                    p.foam_part_share)
     # where the contour rule bounds the target: how much of the outline it could judge (module docstring)
     judged = (float(judged_share(c.R_model, c.position_mm, c.alpha, model, frame, frame.chroma, rig, fit_params).min())
               if frame.chroma is not None else math.nan)

@@ -52,7 +52,7 @@ from photoservo.vision.detection import Detection, detect
 from photoservo.vision.fitness import FitnessParams, StereoHue, stereo_hue
 from photoservo.vision.ga import GAParams
 from photoservo.vision.hue_layout import layout_pairs
-from photoservo.vision.parts import model_parts
+from photoservo.vision.parts import foam_marked, model_parts
 from photoservo.vision.photo_model import HUE_BINS, PhotoModel
 from photoservo.vision.pose_search import Candidate, PoseSearch, drive
 from photoservo.vision.rig import Rig
@@ -109,6 +109,7 @@ class EstimatorParams:
     max_absent_parts: float  # detection also needs at most this share of the model's parts absent (vision/parts.py)
     bare_water_z: float  # ...and of two or more absent parts none on bare water within this many standard
     # errors of the water's colour around the candidate (vision/bare_parts.py; 0 = off)
+    foam_part_share: float  # ...both judging no part with this share of its points on foam (vision/parts.py; 1 = off)
     outline_distinctive: bool  # an outer point on a target hue spills by how much more the creature holds of that
     # hue than the pair does (silhouette.distinctive_weight), not wholly (vision/detection.py)
     outline_grow: float  # when the first candidate fails, one failing its outline alone is tried grown by sqrt(this)
@@ -149,6 +150,7 @@ class EstimatorParams:
             ("max_outer_if_appearance", 0.0 <= self.max_outer_if_appearance <= 1.0, "must be in [0, 1]"),
             ("max_absent_parts", 0.0 <= self.max_absent_parts <= 1.0, "must be in [0, 1]"),
             ("bare_water_z", self.bare_water_z >= 0, "must be >= 0"),
+            ("foam_part_share", 0.0 < self.foam_part_share <= 1.0, "must be in (0, 1]"),
             ("min_generations", 0 <= self.min_generations <= self.max_generations,
              "need 0 <= min_generations <= max_generations"),
             ("patience", self.patience >= 1, "must be >= 1"),
@@ -300,10 +302,12 @@ def acquisition(model: PhotoModel, left_bgr: np.ndarray, right_bgr: np.ndarray, 
     if frame.chroma is None:  # where hue bounds the target: the islands near the lead on their stereo planes
         yield from stereo_islands(firsts, islands, ss.spawn(len(islands)), left_bgr, right_bgr, parts, p)
     # what every candidate's detection reads of the pair, computed once per acquisition
-    looks = dict(grey_frame=stereo_grey(left_bgr, right_bgr), value_frame=stereo_value(left_bgr, right_bgr),
+    value = stereo_value(left_bgr, right_bgr)
+    looks = dict(grey_frame=stereo_grey(left_bgr, right_bgr), value_frame=value,
                  parts=parts, chroma=frame.chroma or stereo_chroma(left_bgr, right_bgr),
                  weight=(distinctive_weight(frame.left, frame.right, model)
-                         if p.outline_distinctive and frame.chroma is None else None))
+                         if p.outline_distinctive and frame.chroma is None else None),
+                 foam=foam_marked(frame, value.left, value.right) if p.foam_part_share < 1.0 else None)
     # the water's colour in each image, for detection's outline on another object (where hue bounds the target)
     looks["water"] = stereo_water(model, frame, looks["chroma"]) if frame.chroma is None else None
     if provisional is not None and len(islands) == 1 and np.isfinite(firsts[0].fitness):
@@ -323,7 +327,7 @@ def acquisition(model: PhotoModel, left_bgr: np.ndarray, right_bgr: np.ndarray, 
     if p.twin_appearance and results:
         search = dict(islands)[results[0][1].source]
         results[0] = yield from appearance_twin(results[0], search, looks["grey_frame"], p, seed, looks["value_frame"],
-                                                looks["parts"], looks["chroma"], looks["weight"])
+                                                looks["parts"], looks["chroma"], looks["weight"], looks["foam"])
     if p.outline_grow > 1.0 and results and not results[0][0].passed:  # after the twin: it draws from the islands' rng
         results = yield from grown_outlines(results, dict(islands), looks, p, seed)
     if frame.chroma is None and results:  # where hue bounds the target: the answer on the plane and at the depth

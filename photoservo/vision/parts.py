@@ -34,22 +34,43 @@ the water carries one of the target's hues (a many-hued fish) parts on water cou
 the check then lets through what it cannot judge. Detection (`vision/detection.py`) rejects a
 candidate with `absent` above `[estimator] max_absent_parts`.
 
+Foam has an edge, and the edge has hue. A foam band over a creature ends in ragged, blurred
+bubbles: beside the white, the creature's colour and the water's mixed with it, pale hues; a
+part straddling the band's edge has most of its points on hue there, few on the target's, and
+counts as absent though the creature is there under it (renderer held-out 1211, 1225, 1234: fits
+within 2-3.4 % of the truth rejected with 2-3 of 12 parts absent, one or two at the band). Foam
+is measurable in the pair itself: pixels without hue at least as bright as the median of the
+image's hued pixels (the water, mostly; shadow is darker; glare is as white and is treated
+alike), in patches (a creature's one-pixel pale rim is not foam). `foam_marked` marks them FOAM
+in the hue frame the parts check reads (vision/detection.py; the fitness, the contrast and the
+outline read the pair as it is), and a part with at least `[estimator] foam_part_share` of its
+points on foam is not judged:
+
+    absent_c(part) = counted and on_target / hued < 1/2 and on_foam / size < foam_part_share
+
 Frames: inner points in photo px offsets (`PhotoModel.inner_uv`); poses as in `fitness`.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
+import cv2
 import numpy as np
 
 from photoservo.vision.fitness import StereoHue, inner_hues
-from photoservo.vision.photo_model import HUE_BINS, PhotoModel
+from photoservo.vision.photo_model import HUE_BINS, NO_HUE, PhotoModel
 from photoservo.vision.rig import Rig
 
 PARTS = 12  # parts of the photo-model (a crab's body, claws and leg groups; a fish's head, fins, tail)
 MIN_HUED_SHARE = 0.3  # a part counts in a camera when at least this share of its points land on hue...
 MIN_POINTS = 3  # ...and at least this many
+FOAM = 254  # `foam_marked`: a pixel without hue that is foam (or glare): white
+# ...in a patch at least this wide: a morphological opening by a 3 x 3 disc drops the one-pixel pale
+# rim a creature's outline blends into the water (renderer look-alike null 1847: a crab's model on
+# a fish, 4 of 12 parts absent, 2 when its rim counted as foam)
+FOAM_OPENING = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (3, 3))
 
 
 def model_parts(inner_uv: np.ndarray, n_parts: int = PARTS, iterations: int = 30) -> np.ndarray:
@@ -79,11 +100,13 @@ def model_parts(inner_uv: np.ndarray, n_parts: int = PARTS, iterations: int = 30
     return labels
 
 
-def absent_flags(hued: np.ndarray, on_target: np.ndarray, labels: np.ndarray) -> np.ndarray:
+def absent_flags(hued: np.ndarray, on_target: np.ndarray, labels: np.ndarray,
+                 foam: np.ndarray | None = None, foam_share: float = 1.0) -> np.ndarray:
     """(C, n_parts) bool: the parts absent in each camera (module docstring) from per-camera
     (C, N_in) bool arrays `hued` (the point lands on a pixel with hue) and `on_target` (...on a
     target hue) and the part `labels` (`model_parts`): counted (enough of its points on hue) and
-    fewer than half of those on a target hue."""
+    fewer than half of those on a target hue — and, with `foam` ((C, N_in) bool: the point lands
+    on foam, `foam_marked`), fewer than `foam_share` of its points on foam (module docstring)."""
     hued = np.atleast_2d(np.asarray(hued, bool))
     agrees = np.atleast_2d(np.asarray(on_target, bool)) & hued
     n = int(labels.max()) + 1 if len(labels) else 0
@@ -93,6 +116,8 @@ def absent_flags(hued: np.ndarray, on_target: np.ndarray, labels: np.ndarray) ->
         nh = np.bincount(labels, weights=h, minlength=n)
         na = np.bincount(labels, weights=a, minlength=n)
         out[k] = counted(nh, size) & (na < 0.5 * nh)
+        if foam is not None:  # a part straddling foam: its hued points are the foam's fringe
+            out[k] &= np.bincount(labels, weights=np.atleast_2d(foam)[k], minlength=n) < foam_share * size
     return out
 
 
@@ -101,15 +126,17 @@ def counted(nh: np.ndarray, size: np.ndarray) -> np.ndarray:
     return (nh >= np.maximum(MIN_POINTS, MIN_HUED_SHARE * size)) & (size > 0)
 
 
-def absent_share(hued: np.ndarray, on_target: np.ndarray, labels: np.ndarray) -> float:
+def absent_share(hued: np.ndarray, on_target: np.ndarray, labels: np.ndarray,
+                 foam: np.ndarray | None = None, foam_share: float = 1.0) -> float:
     """The share of parts absent (module docstring) from per-camera (C, N_in) bool arrays `hued`
     (the point lands on a pixel with hue) and `on_target` (...on a target hue) and the part
     `labels` (`model_parts`): the worse camera's absent parts over all of the model's parts (those
-    without enough hue, under foam or glare, are not absent); nan when no camera counts a part."""
+    without enough hue, under foam or glare, are not absent; nor, with `foam`, those straddling
+    foam: `absent_flags`); nan when no camera counts a part."""
     hued = np.atleast_2d(np.asarray(hued, bool))
     n = int(labels.max()) + 1 if len(labels) else 0
     size = np.bincount(labels, minlength=n)
-    flags = absent_flags(hued, on_target, labels)
+    flags = absent_flags(hued, on_target, labels, foam, foam_share)
     worst = math.nan
     for h, f in zip(hued, flags):
         if not counted(np.bincount(labels, weights=h, minlength=n), size).any():
@@ -120,11 +147,31 @@ def absent_share(hued: np.ndarray, on_target: np.ndarray, labels: np.ndarray) ->
 
 
 def absent_parts(R: np.ndarray, t: np.ndarray, alpha: float, model: PhotoModel, frame: StereoHue, rig: Rig,
-                 labels: np.ndarray | None = None) -> float:
+                 labels: np.ndarray | None = None, foam_share: float = 1.0) -> float:
     """`absent_share` of one pose: R (3, 3) the model's linear map (`Candidate.R_model`), t (3,)
-    mm in the left camera frame, alpha px/mm; `labels` from `model_parts` (computed when None)."""
+    mm in the left camera frame, alpha px/mm; `labels` from `model_parts` (computed when None);
+    with `frame` from `foam_marked`, a part with at least `foam_share` of its points on foam is
+    not judged (module docstring; 1: every part is)."""
     h = inner_hues(R, t, alpha, model, frame, rig)
     hued = h < HUE_BINS
     lut = np.zeros(256, bool)
     lut[:HUE_BINS] = np.asarray(model.target_hues, bool)
-    return absent_share(hued, lut[h], model_parts(model.inner_uv) if labels is None else labels)
+    return absent_share(hued, lut[h], model_parts(model.inner_uv) if labels is None else labels, h == FOAM, foam_share)
+
+
+def foam_marked(frame: StereoHue, value_left: np.ndarray, value_right: np.ndarray) -> StereoHue:
+    """`frame` with its foam marked FOAM (a value without hue, >= HUE_BINS: the fitness never
+    reads this frame; the parts check does, module docstring): in each camera the pixels without
+    hue at least as bright as the median of the image's hued pixels (the water, mostly; shadow
+    is darker) (`value_*`: HSV value 0..255, `sampling.brightness`), opened by `FOAM_OPENING`
+    (patches, not a rim). The frame as it is when an image has no hued pixel."""
+    out = []
+    for hue, value in ((frame.left, value_left), (frame.right, value_right)):
+        hued = hue != NO_HUE
+        if not hued.any():
+            return frame
+        marked = hue.copy()
+        white = (~hued & (value >= float(np.median(value[hued])))).astype(np.uint8)
+        marked[cv2.morphologyEx(white, cv2.MORPH_OPEN, FOAM_OPENING) > 0] = FOAM
+        out.append(np.ascontiguousarray(marked))
+    return dataclasses.replace(frame, left=out[0], right=out[1])
