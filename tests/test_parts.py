@@ -15,7 +15,8 @@ from photoservo.sim.scenes import EFFECTS, random_scene
 from photoservo.vision.detection import detect
 from photoservo.vision.estimator import estimate
 from photoservo.vision.fitness import StereoHue, inner_hues, stereo_hue
-from photoservo.vision.parts import FOAM, PARTS, absent_flags, absent_parts, absent_share, foam_marked, model_parts
+from photoservo.vision.parts import (FOAM, PARTS, absent_flags, absent_parts, absent_share, foam_marked, model_parts,
+                                     under_foam)
 from photoservo.vision.photo_model import HUE_BINS, NO_HUE, build_photo_model
 from photoservo.vision.pose_search import Candidate
 
@@ -130,9 +131,9 @@ def test_another_individual_under_foam_with_its_arm_tips_elsewhere_is_found():
 
 def test_foam_is_marked_and_a_part_straddling_it_is_not_judged():
     """`foam_marked`: patches of pixels without hue at least as bright as the image's hued median
-    are FOAM (shadow, darker, and a one-pixel pale rim stay NO_HUE); a part with `foam_share` of
-    its points on foam is not absent however few of its hued points are on a target hue
-    (`absent_flags`)."""
+    are FOAM (shadow, darker, and a one-pixel pale rim stay NO_HUE); where the model lies under
+    foam (`under_foam`) a part with `foam_share` of its points on foam is not absent however few
+    of its hued points are on a target hue (`absent_flags`)."""
     hue = np.full((40, 60), 100, np.uint8)  # water's hue
     value = np.full((40, 60), 120.0, np.float32)
     hue[:, 28:32], value[:, 28:32] = NO_HUE, 240.0  # a white foam band
@@ -151,8 +152,10 @@ def test_foam_is_marked_and_a_part_straddling_it_is_not_judged():
     on[0, 10:] = True
     foam = ~hued
     assert absent_flags(hued, on, labels).tolist() == [[True, False]]
-    assert absent_flags(hued, on, labels, foam, 0.2).tolist() == [[False, False]]
-    assert absent_flags(hued, on, labels, foam, 0.4).tolist() == [[True, False]]
+    assert under_foam(foam, 0.15) and not under_foam(foam, 0.2)  # 3 of the model's 20 points on foam
+    assert absent_flags(hued, on, labels, foam, 0.1).tolist() == [[False, False]]
+    # a model with too few of its points on foam (glitter beside a look-alike) has every part judged
+    assert absent_flags(hued, on, labels, foam, 0.2).tolist() == [[True, False]]
 
 
 def test_a_split_squid_with_a_part_at_the_band_edge_is_found():

@@ -45,7 +45,7 @@ import numpy as np
 from photoservo.vision.appearance import StereoGrey
 from photoservo.vision.contour import StereoChroma
 from photoservo.vision.fitness import StereoHue, nearest_pixel, project_model
-from photoservo.vision.parts import FOAM, absent_flags
+from photoservo.vision.parts import FOAM, absent_flags, under_foam
 from photoservo.vision.photo_model import HUE_BINS, PhotoModel
 from photoservo.vision.rig import Rig
 
@@ -83,12 +83,15 @@ def bare_flags(R: np.ndarray, t: np.ndarray, alpha: float, model: PhotoModel, fr
     bare = np.zeros((2, n), bool)
     views = ((p.inner_left[0], p.outer_left[0], frame.left, grey_frame.left, chroma.left),
              (p.inner_right[0], p.outer_right[0], frame.right, grey_frame.right, chroma.right))
+    foam = np.stack([_colours(v[0], v[3], v[4], v[2])[1] == FOAM for v in views])  # both cameras' (parts.under_foam)
+    if not under_foam(foam, foam_share):
+        foam_share = 1.0
     for k, (uv_in, uv_out, hue, grey, ab) in enumerate(views):
         c_in, h_in, _, pix = _colours(uv_in, grey, ab, hue)
         c_out, h_out, _, _ = _colours(uv_out, grey, ab, hue)
         hued = h_in < HUE_BINS
         on = hued & target[np.minimum(h_in, HUE_BINS)]
-        absent[k] = absent_flags(hued[None], on[None], labels, (h_in == FOAM)[None], foam_share)[0]
+        absent[k] = absent_flags(hued[None], on[None], labels, foam[k][None], foam_share)[0]
         water = (h_out < HUE_BINS) & ~target[np.minimum(h_out, HUE_BINS)]
         if not absent[k].any() or water.sum() < MIN_WATER or on.sum() < MIN_BODY:
             continue

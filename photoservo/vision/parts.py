@@ -43,10 +43,13 @@ is measurable in the pair itself: pixels without hue at least as bright as the m
 image's hued pixels (the water, mostly; shadow is darker; glare is as white and is treated
 alike), in patches (a creature's one-pixel pale rim is not foam). `foam_marked` marks them FOAM
 in the hue frame the parts check reads (vision/detection.py; the fitness, the contrast and the
-outline read the pair as it is), and a part with at least `[estimator] foam_part_share` of its
-points on foam is not judged:
+outline read the pair as it is). Where the model lies under foam (`under_foam`: at least
+`[estimator] foam_part_share` of its inner points on foam in both cameras, as a band across the
+creature puts them; glare and sun glitter beside a look-alike put few there) a part with at
+least that share of its points on foam is not judged:
 
-    absent_c(part) = counted and on_target / hued < 1/2 and on_foam / size < foam_part_share
+    absent_c(part) = counted and on_target / hued < 1/2
+                     and not (under_foam and on_foam(part) / size(part) >= foam_part_share)
 
 Frames: inner points in photo px offsets (`PhotoModel.inner_uv`); poses as in `fitness`.
 """
@@ -106,7 +109,8 @@ def absent_flags(hued: np.ndarray, on_target: np.ndarray, labels: np.ndarray,
     (C, N_in) bool arrays `hued` (the point lands on a pixel with hue) and `on_target` (...on a
     target hue) and the part `labels` (`model_parts`): counted (enough of its points on hue) and
     fewer than half of those on a target hue — and, with `foam` ((C, N_in) bool: the point lands
-    on foam, `foam_marked`), fewer than `foam_share` of its points on foam (module docstring)."""
+    on foam, `foam_marked`) where the model lies under foam (`under_foam`), fewer than
+    `foam_share` of its points on foam (module docstring)."""
     hued = np.atleast_2d(np.asarray(hued, bool))
     agrees = np.atleast_2d(np.asarray(on_target, bool)) & hued
     n = int(labels.max()) + 1 if len(labels) else 0
@@ -116,9 +120,18 @@ def absent_flags(hued: np.ndarray, on_target: np.ndarray, labels: np.ndarray,
         nh = np.bincount(labels, weights=h, minlength=n)
         na = np.bincount(labels, weights=a, minlength=n)
         out[k] = counted(nh, size) & (na < 0.5 * nh)
-        if foam is not None:  # a part straddling foam: its hued points are the foam's fringe
+        if foam is not None and under_foam(foam, foam_share):  # a part straddling it: its hued points are its fringe
             out[k] &= np.bincount(labels, weights=np.atleast_2d(foam)[k], minlength=n) < foam_share * size
     return out
+
+
+def under_foam(foam: np.ndarray, foam_share: float) -> bool:
+    """A model lies under foam when at least `foam_share` of its inner points land on foam in every
+    camera (`foam` (C, N_in) bool, `foam_marked`): a band across the creature (renderer split
+    targets 14-29 %), not glare or sun glitter beside a look-alike (renderer look-alike null 1853,
+    a buoy in glitter: 8 % and 3 %, two of its crab model's legs on glitter)."""
+    foam = np.atleast_2d(np.asarray(foam, bool))
+    return foam.size > 0 and float(foam.mean(axis=1).min()) >= foam_share
 
 
 def counted(nh: np.ndarray, size: np.ndarray) -> np.ndarray:
