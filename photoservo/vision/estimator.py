@@ -109,7 +109,8 @@ class EstimatorParams:
     max_absent_parts: float  # detection also needs at most this share of the model's parts absent (vision/parts.py)
     bare_water_z: float  # ...and of two or more absent parts none on bare water within this many standard
     # errors of the water's colour around the candidate (vision/bare_parts.py; 0 = off)
-    foam_part_share: float  # ...both judging no part with this share of its points on foam (vision/parts.py; 1 = off)
+    foam_part_share: float  # ...both judging no part with this share of its points on foam where this share of the
+    # model's lies on foam in both cameras (vision/parts.py: a part straddling a foam band's edge; 1 = off)
     outline_distinctive: bool  # an outer point on a target hue spills by how much more the creature holds of that
     # hue than the pair does (silhouette.distinctive_weight), not wholly (vision/detection.py)
     outline_grow: float  # when the first candidate fails, one failing its outline alone is tried grown by sqrt(this)
