@@ -3,8 +3,9 @@ island's head-to-tail twin (`turned_islands`), the islands near the lead turned 
 images see (`stereo_islands`), the leading fit's refinements (`refined`), the candidates ranked by
 standing (`ranked`, vision/detection.py; where the contour rule scores, those whose two images lie on
 two surfaces last: `same_surface_first`), the first candidate's twin chosen by the appearance cue
-(`appearance_twin`), the candidates failing their outline alone tried grown (`grown_outlines`), and
-the first, when it passes, searched again at the depth both images see (`stereo_depth`). Each search
+(`appearance_twin`), the candidates failing their outline alone tried grown (`grown_outlines`), those
+failing their parts alone re-fitted at quarter turns (`parted_turns`), and the first, when it passes,
+searched again at the depth both images see (`stereo_depth`). Each search
 step is a generator yielding the GA generations it ran (`pose_search.drive` runs one to its end; the
 tracker spreads them over camera frames)."""
 
@@ -19,7 +20,7 @@ import numpy as np
 
 from photoservo.vision.appearance import StereoGrey, appearance
 from photoservo.vision.contour import StereoChroma
-from photoservo.vision.detection import Detection, detect
+from photoservo.vision.detection import MAX_OFF_WATER, MIN_JUDGED_SHARE, Detection, detect
 from photoservo.vision.fitness import StereoHue, fitness, point_weight
 from photoservo.vision.parts import absent_parts
 from photoservo.vision.photo_model import PhotoModel
@@ -429,6 +430,50 @@ def grown_outlines(results: list[tuple[Detection, Candidate]], searches: dict[st
         d_g = detect(grown, search.model, search.frame, search.rig, search.fit_params, p, seed=seed, **looks)
         if d_g.passed and d_g.outer_on_target <= GROWN_SPILL_RATIO * d.outer_on_target:
             out[k] = (d_g, grown)
+    return ranked(out, p.passed_standing_ratio)
+
+
+# the turns `parted_turns` re-fits a candidate failing on its parts alone at (quarter turns about the photo
+# mask's centroid), each by a short GA with heading +- PARTED_HEADING_DEG (the four cover every heading),
+# tilt +- QUARTER_TILT_DEG, position +- 3 % of the depth and alpha +- 8 %
+PARTED_QUARTERS = (0, 1, -1, 2)
+PARTED_HEADING_DEG = 45.0
+
+
+def parted_turns(results: list[tuple[Detection, Candidate]], searches: dict[str, PoseSearch], looks: dict,
+                 p: EstimatorParams, seed: int = 0) -> Generator[int, None, list[tuple[Detection, Candidate]]]:
+    """The candidates, re-ranked after each one that fails its parts alone (its contrast and its
+    outline pass, the outline judged and not on another object: vision/detection.py; more than
+    `max_absent_parts` of its parts absent, or two absent and one on bare water) was re-fitted
+    turned: at each of PARTED_QUARTERS quarter turns about the photo mask's centroid
+    (`twins.turned_about_centroid`), by a short GA (PARTED_HEADING_DEG); the fittest of
+    them, when the hue fitness rose, replaces the candidate when it passes detection. An island's
+    GA can end at the creature's place with its heading off (harbour 1208, a crab tilted 38 deg:
+    heading 31 deg off, 0.703 against the truth's 0.838; 1238, a quarter turn off), where the
+    model's legs lie beside the creature's and detection finds them absent; the decision stays
+    detection's, on the re-fit. Own random streams (`Generator.spawn`, one per turn whether tried or
+    not): the search's stream is as before. `searches`, `looks`: as `grown_outlines`'. One generation
+    per step."""
+    out = list(results)
+    for k, (d, c) in enumerate(results):
+        excused = (d.outer_on_target <= p.max_outer_if_appearance
+                   and bool(np.all(np.asarray([d.appearance, d.body_layout]) >= p.min_appearance)))
+        if (d.passed or d.contrast < p.min_contrast or not (d.outer_on_target <= p.max_outer_on_target or excused)
+                or d.outline_judged < MIN_JUDGED_SHARE or d.off_water > MAX_OFF_WATER or not np.isfinite(c.fitness)):
+            continue  # passes, or fails on more than its parts (nan outline cues: not measured, not a reason)
+        search, best = searches[c.source], c
+        for quarters, rng in zip(PARTED_QUARTERS, search.ga.rng.spawn(len(PARTED_QUARTERS))):
+            R, t = ((c.R, c.position_mm) if quarters == 0
+                    else turned_about_centroid(c.R, c.position_mm, c.alpha, search.model, c.aspect, quarters))
+            g = yield from search.local_steps(R, t, c.alpha, position_frac=0.03, heading_deg=PARTED_HEADING_DEG,
+                                              tilt_deg=QUARTER_TILT_DEG, alpha_frac=0.08, rng=rng)
+            best = g if g.fitness > best.fitness else best
+        if best is c:
+            continue
+        best = dataclasses.replace(best, source=c.source)
+        d_b = detect(best, search.model, search.frame, search.rig, search.fit_params, p, seed=seed, **looks)
+        if d_b.passed:
+            out[k] = (d_b, best)
     return ranked(out, p.passed_standing_ratio)
 
 
