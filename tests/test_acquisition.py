@@ -369,11 +369,7 @@ def test_a_fit_tilted_off_the_plane_both_images_see_is_searched_again_there():
     from photoservo.sim.scenes import EFFECTS
 
     sc = random_scene(1146, CFG.synthetic, CFG.photo_model, kind="fish", effects=tuple(EFFECTS))
-    model = build_photo_model(sc.photo, CFG.photo_model)
-    est = estimate(model, sc.left, sc.right, sc.rig, CFG.ga, CFG.estimator, CFG.fitness, seed=146)
-    t = np.array(sc.truth["position_mm"])
-    assert est.found
-    assert np.linalg.norm(est.position_mm - t) < 0.05 * t[2]
+    est = _found_within_5_percent(sc, seed=146)
     assert heading_tilt_error(np.array(sc.truth["rotation"]), est.rotation)[1] < 10.0
 
 
@@ -428,11 +424,7 @@ def test_a_fit_failing_on_its_parts_alone_is_re_fitted_turned():
     from photoservo.sim import harbour
 
     sc = harbour.random_scene(1208, CFG.synthetic, CFG.photo_model, kind="crab")
-    model = build_photo_model(sc.photo, CFG.photo_model)
-    est = estimate(model, sc.left, sc.right, sc.rig, CFG.ga, CFG.estimator, CFG.fitness, seed=208)
-    t = np.array(sc.truth["position_mm"])
-    assert est.found
-    assert np.linalg.norm(est.position_mm - t) < 0.05 * t[2]
+    est = _found_within_5_percent(sc, seed=208)
     assert heading_tilt_error(np.array(sc.truth["rotation"]), est.rotation)[0] < 10.0
 
 
@@ -453,3 +445,13 @@ def test_a_look_alike_failing_on_its_parts_stays_rejected_re_fitted_turned(gener
     model = build_photo_model(sc.photo, CFG.photo_model)
     est = estimate(model, sc.left, sc.right, sc.rig, CFG.ga, CFG.estimator, CFG.fitness, seed=seed - 1500)
     assert est.candidates and not est.found
+
+
+def _found_within_5_percent(sc, seed: int):
+    """estimate() of a synthetic scene from its own photo-model, asserted found within 5 % of its distance."""
+    model = build_photo_model(sc.photo, CFG.photo_model)
+    est = estimate(model, sc.left, sc.right, sc.rig, CFG.ga, CFG.estimator, CFG.fitness, seed=seed)
+    t = np.array(sc.truth["position_mm"])
+    assert est.found
+    assert np.linalg.norm(est.position_mm - t) < 0.05 * t[2]
+    return est
