@@ -77,8 +77,7 @@ def bare_flags(R: np.ndarray, t: np.ndarray, alpha: float, model: PhotoModel, fr
     `parts.model_parts` of the model."""
     p = project_model(R, t, alpha, model, rig)
     n = int(labels.max()) + 1 if len(labels) else 0
-    target = np.zeros(HUE_BINS + 1, bool)
-    target[:HUE_BINS] = np.asarray(model.target_hues, bool)[:HUE_BINS]
+    target = _target_lut(model)
     absent = np.zeros((2, n), bool)
     bare = np.zeros((2, n), bool)
     views = ((p.inner_left[0], p.outer_left[0], frame.left, grey_frame.left, chroma.left),

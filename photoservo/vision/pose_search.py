@@ -21,10 +21,10 @@ import numpy as np
 from photoservo.vision.fitness import FitnessParams, StereoHue, fitness
 from photoservo.vision.ga import GA, GAParams, Region
 from photoservo.vision.genes import GeneSpace
-from photoservo.vision.photo_model import HUE_BINS, PhotoModel
+from photoservo.vision.photo_model import PhotoModel
 from photoservo.vision.rig import Rig
 from photoservo.vision.sampling import grey
-from photoservo.vision.stereo_plane import align_to_plane, fit_target_plane
+from photoservo.vision.stereo_plane import align_to_plane, fit_target_plane, on_target_hue
 from photoservo.vision.twins import alternatives, turned_about_centroid
 
 if TYPE_CHECKING:
@@ -298,10 +298,8 @@ class PoseSearch:
         (the hue fitness vetoes a plane fitted to the wrong thing); position +- 2 % of the depth, heading +- 5
         deg, alpha +- 5 %, with `follow` +- max(2 %, theta / 10), max(5 deg, theta), max(5 %, theta / 2): a fit
         tilted too little fits with heading and scale off (renderer 1019). `rng`: see `local_steps`."""
-        lut = np.zeros(256, bool)
-        lut[:HUE_BINS] = np.asarray(self.model.target_hues, bool)
         plane = fit_target_plane(best.R, best.position_mm, best.alpha, self.model, grey(left_bgr),
-                                 grey(right_bgr), self.rig, on_target=lut[self.frame.left])
+                                 grey(right_bgr), self.rig, on_target=on_target_hue(self.model, self.frame.left))
         if plane is None:
             return best
         R2, t2 = align_to_plane(best.R, best.position_mm, plane)
