@@ -16,7 +16,7 @@ from photoservo.vision.bare_parts import off_water, water_chroma
 from photoservo.vision.contour import stereo_chroma
 from photoservo.vision.estimator import estimate
 from photoservo.vision.fitness import stereo_hue
-from photoservo.vision.photo_model import HUE_BINS, build_photo_model
+from photoservo.vision.photo_model import build_photo_model, target_hue_lut
 from photoservo.vision.pose_search import Candidate
 
 CFG = load_config()
@@ -69,9 +69,7 @@ def test_off_water_counts_outer_points_a_colour_edge_from_the_water():
     share = off_water(c.R_model, c.position_mm, c.alpha, model, frame, chroma, sc.rig, CFG.fitness.contour_chroma)
     assert share.shape == (2,) and np.all(share <= 0.05)  # a creature on open water
     # the same outline on a pair painted another colour off the creature: all of it on another object
-    target = np.zeros(HUE_BINS + 1, bool)
-    target[:HUE_BINS] = np.asarray(model.target_hues, bool)[:HUE_BINS]
-    w = water_chroma(frame.left, chroma.left, target)
+    w = water_chroma(frame.left, chroma.left, target_hue_lut(model.target_hues))
     assert np.all(np.isfinite(w))
     painted = chroma.left.copy()
     painted[..., 0] = np.clip(w[0] + 40, 0, 255)

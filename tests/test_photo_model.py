@@ -23,6 +23,7 @@ from photoservo.vision.photo_model import (
     hue_image,
     load_photo_model,
     parse_roi,
+    target_hue_lut,
 )
 from photoservo.sim.specimens import SPECIES, specimen
 
@@ -123,6 +124,18 @@ def test_max_points_coarsens_the_grid():
     p = dataclasses.replace(PARAMS, max_points=300)
     m = build_photo_model(specimen("squid"), p)
     assert 150 < len(m.inner_uv) + len(m.outer_uv) <= 300
+
+
+def test_target_hue_lut_reads_every_hue_image_value():
+    # the one table the detection rules, seeding and the recorder index a hue image with: the model's
+    # target hues True, every value from HUE_BINS on (NO_HUE, the parts check's FOAM) False
+    model = build_photo_model(specimen("squid"), PARAMS)
+    lut = target_hue_lut(model.target_hues)
+    assert lut.shape == (256,) and lut.dtype == bool
+    assert np.array_equal(lut[:180], model.target_hues) and 0 < lut.sum() < 180
+    assert not lut[180:].any() and not lut[NO_HUE]
+    hue = hue_image(specimen("squid"), PARAMS.min_saturation, PARAMS.min_value)
+    assert lut[hue].shape == hue.shape
 
 
 def test_circular_median_wraps():

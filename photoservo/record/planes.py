@@ -40,7 +40,7 @@ from typing import Any
 import cv2
 import numpy as np
 
-from photoservo.vision.photo_model import HUE_BINS, hue_distance
+from photoservo.vision.photo_model import HUE_BINS, hue_distance, target_hue_lut
 
 #: Keys the hue planes depend on; with photo_model.* they need full frames to change.
 #: estimator.layout_share decides which frames keep their raw hues (`frame_lut`).
@@ -97,9 +97,7 @@ def apply_lut(image: np.ndarray, lut: np.ndarray) -> np.ndarray:
 
 def target_mask(hue: np.ndarray, target_hues: np.ndarray) -> np.ndarray:
     """uint8 (H, W): 1 where the hue image has one of the model's target hues."""
-    lut = np.zeros(256, np.uint8)
-    lut[:HUE_BINS] = np.asarray(target_hues, bool)
-    return apply_lut(hue, lut)
+    return apply_lut(hue, target_hue_lut(target_hues).astype(np.uint8))
 
 
 def grey_near_target(bgr: np.ndarray, hue: np.ndarray, target_hues: np.ndarray | None,

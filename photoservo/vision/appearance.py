@@ -47,7 +47,7 @@ import cv2
 import numpy as np
 
 from photoservo.vision.fitness import StereoHue, nearest_pixel
-from photoservo.vision.photo_model import HUE_BINS, PhotoModel
+from photoservo.vision.photo_model import PhotoModel, target_hue_lut
 from photoservo.vision.rig import Rig, project_points
 from photoservo.vision.sampling import brightness, grey, image_values, sampling_pitch
 
@@ -94,9 +94,7 @@ def on_target(uv: np.ndarray, hue: np.ndarray, target_hues: np.ndarray) -> np.nd
     False outside the image or on a pixel without hue)."""
     ri, ci, inside = nearest_pixel(uv, hue.shape)
     h = hue[ri, ci]
-    lut = np.zeros(256, bool)
-    lut[:HUE_BINS] = np.asarray(target_hues, bool)
-    return inside & lut[h]
+    return inside & target_hue_lut(target_hues)[h]
 
 
 def camera_correlations(R: np.ndarray, t: np.ndarray, alpha: float, model: PhotoModel, samples: np.ndarray,

@@ -46,7 +46,7 @@ from photoservo.vision.appearance import StereoGrey
 from photoservo.vision.contour import StereoChroma
 from photoservo.vision.fitness import StereoHue, nearest_pixel, project_model
 from photoservo.vision.parts import FOAM, absent_flags, under_foam
-from photoservo.vision.photo_model import HUE_BINS, PhotoModel
+from photoservo.vision.photo_model import HUE_BINS, PhotoModel, target_hue_lut
 from photoservo.vision.rig import Rig
 
 BARE_Z = 2.0  # standard errors: a part's mean colour position closer to the water's than this is bare water
@@ -77,7 +77,7 @@ def bare_flags(R: np.ndarray, t: np.ndarray, alpha: float, model: PhotoModel, fr
     `parts.model_parts` of the model."""
     p = project_model(R, t, alpha, model, rig)
     n = int(labels.max()) + 1 if len(labels) else 0
-    target = _target_lut(model)
+    target = target_hue_lut(model.target_hues)
     absent = np.zeros((2, n), bool)
     bare = np.zeros((2, n), bool)
     views = ((p.inner_left[0], p.outer_left[0], frame.left, grey_frame.left, chroma.left),
@@ -89,9 +89,9 @@ def bare_flags(R: np.ndarray, t: np.ndarray, alpha: float, model: PhotoModel, fr
         c_in, h_in, _, pix = _colours(uv_in, grey, ab, hue)
         c_out, h_out, _, _ = _colours(uv_out, grey, ab, hue)
         hued = h_in < HUE_BINS
-        on = hued & target[np.minimum(h_in, HUE_BINS)]
+        on = target[h_in]
         absent[k] = absent_flags(hued[None], on[None], labels, foam[k][None], foam_share)[0]
-        water = (h_out < HUE_BINS) & ~target[np.minimum(h_out, HUE_BINS)]
+        water = (h_out < HUE_BINS) & ~target[h_out]
         if not absent[k].any() or water.sum() < MIN_WATER or on.sum() < MIN_BODY:
             continue
         w = np.median(c_out[water], axis=0)
@@ -117,26 +117,17 @@ def bare_parts(R: np.ndarray, t: np.ndarray, alpha: float, model: PhotoModel, fr
     return int(absent.sum(axis=1).max()) if absent.size else 0, int(bare.sum())
 
 
-
 def water_chroma(hue: np.ndarray, ab: np.ndarray, target: np.ndarray) -> np.ndarray:
     """(2,) the image's water colour: the median a*, b* over its pixels on hue but off the target's
-    hues (`target`, (HUE_BINS + 1,) bool; every `WATER_STRIDE`-th such pixel)."""
-    water = ~target[np.minimum(hue.ravel(), HUE_BINS)]  # NO_HUE maps past the table's last entry, a target
-    water[hue.ravel() >= HUE_BINS] = False
+    hues (`target`, `photo_model.target_hue_lut`; every `WATER_STRIDE`-th such pixel)."""
+    water = ~target[hue.ravel()] & (hue.ravel() < HUE_BINS)
     px = ab.reshape(-1, 2)[np.flatnonzero(water)[::WATER_STRIDE]]
     return np.median(px.astype(np.float64), axis=0) if len(px) else np.full(2, np.nan)
 
 
-def _target_lut(model: PhotoModel) -> np.ndarray:
-    """(HUE_BINS + 1,) bool: which hue values (NO_HUE and above: none) are the model's target hues."""
-    target = np.zeros(HUE_BINS + 1, bool)
-    target[:HUE_BINS] = np.asarray(model.target_hues, bool)[:HUE_BINS]
-    return target
-
-
 def stereo_water(model: PhotoModel, frame: StereoHue, chroma: StereoChroma) -> np.ndarray:
     """(2, 2): `water_chroma` of the left and right image (rows) for `off_water`, read once per pair."""
-    target = _target_lut(model)
+    target = target_hue_lut(model.target_hues)
     return np.stack([water_chroma(frame.left, chroma.left, target), water_chroma(frame.right, chroma.right, target)])
 
 
@@ -149,7 +140,7 @@ def off_water(R: np.ndarray, t: np.ndarray, alpha: float, model: PhotoModel, fra
     band) has its outline there; a creature's lies on water, foam or glints (no hue). `water`: the
     pair's `stereo_water` (computed when None)."""
     p = project_model(R, t, alpha, model, rig)
-    target = _target_lut(model)
+    target = target_hue_lut(model.target_hues)
     water = stereo_water(model, frame, chroma) if water is None else water
     out = np.zeros(2)
     for k, (uv_out, hue, ab) in enumerate(((p.outer_left[0], frame.left, chroma.left),
@@ -159,7 +150,7 @@ def off_water(R: np.ndarray, t: np.ndarray, alpha: float, model: PhotoModel, fra
         ri, ci, ok = nearest_pixel(uv_out, hue.shape)
         h = np.where(ok, hue[ri, ci], HUE_BINS).astype(np.int16)
         col = ab[ri, ci].astype(np.float64)
-        off = (h < HUE_BINS) & ~target[np.minimum(h, HUE_BINS)]
+        off = (h < HUE_BINS) & ~target[h]
         far = np.linalg.norm(col - water[k], axis=1) > edge
         out[k] = float((off & far).sum()) / len(uv_out)
     return out

@@ -42,7 +42,7 @@ import numpy as np
 from numba import njit
 
 from photoservo.vision.fitness_kernel import _FAST, _pixel_indices, _plane_map, _split_points, camera_vector
-from photoservo.vision.photo_model import HUE_BINS, NO_HUE, PhotoModel
+from photoservo.vision.photo_model import HUE_BINS, NO_HUE, PhotoModel, target_hue_lut
 from photoservo.vision.rig import Rig
 
 if TYPE_CHECKING:
@@ -222,16 +222,11 @@ def judged_share(R: np.ndarray, t: np.ndarray, alpha: float, model: PhotoModel, 
     return judged[0].mean(axis=-1) if judged.shape[-1] else np.zeros(2)
 
 
-def _on_target(h: np.ndarray, model: PhotoModel) -> np.ndarray:
-    """Which hue values h (any shape; NO_HUE and the other values >= HUE_BINS: none) are target hues."""
-    return (h < HUE_BINS) & np.asarray(model.target_hues, bool)[np.minimum(h, HUE_BINS - 1)]
-
-
 def contour_counts_reference(R: np.ndarray, t: np.ndarray, alpha: np.ndarray, model: PhotoModel,
                              frame: StereoHue, rig: Rig, params: FitnessParams) -> np.ndarray:
     """`contour_counts` in numpy (the specification, on `contour_cases`)."""
     h, _, ok, edge = contour_cases(R, t, alpha, model, frame, frame.chroma, rig, params)
-    target = _on_target(h, model)
+    target = target_hue_lut(model.target_hues)[h]
     return np.stack([(ok & target & edge).sum(-1), (ok & target & ~edge).sum(-1),
                      (ok & (h >= HUE_BINS) & edge).sum(-1)], axis=-1).astype(np.int64)
 
@@ -241,8 +236,9 @@ def outline_spill_reference(R: np.ndarray, t: np.ndarray, alpha: np.ndarray, mod
                             weight: np.ndarray) -> np.ndarray:
     """`outline_spill` in numpy (the specification, on `contour_cases`)."""
     h, h_in, judged, edge = contour_cases(R, t, alpha, model, frame, chroma, rig, params)
-    target = _on_target(h, model)
-    goes_on = target & judged & ~edge & _on_target(h_in, model)
+    lut = target_hue_lut(model.target_hues)
+    target = lut[h]
+    goes_on = target & judged & ~edge & lut[h_in]
     rim = target & ~(judged & edge) & ~goes_on
     return goes_on.sum(axis=-1) + (np.asarray(weight, np.float64)[h] * rim).sum(axis=-1)
 

@@ -63,7 +63,7 @@ import cv2
 import numpy as np
 
 from photoservo.vision.fitness import StereoHue, inner_hues
-from photoservo.vision.photo_model import HUE_BINS, NO_HUE, PhotoModel
+from photoservo.vision.photo_model import HUE_BINS, NO_HUE, PhotoModel, target_hue_lut
 from photoservo.vision.rig import Rig
 
 PARTS = 12  # parts of the photo-model (a crab's body, claws and leg groups; a fish's head, fins, tail)
@@ -167,9 +167,7 @@ def absent_parts(R: np.ndarray, t: np.ndarray, alpha: float, model: PhotoModel, 
     not judged (module docstring; 1: every part is)."""
     h = inner_hues(R, t, alpha, model, frame, rig)
     hued = h < HUE_BINS
-    lut = np.zeros(256, bool)
-    lut[:HUE_BINS] = np.asarray(model.target_hues, bool)
-    return absent_share(hued, lut[h], model_parts(model.inner_uv) if labels is None else labels, h == FOAM, foam_share)
+    return absent_share(hued, target_hue_lut(model.target_hues)[h], model_parts(model.inner_uv) if labels is None else labels, h == FOAM, foam_share)
 
 
 def foam_marked(frame: StereoHue, value_left: np.ndarray, value_right: np.ndarray) -> StereoHue:

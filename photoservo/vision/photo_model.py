@@ -108,6 +108,15 @@ def hue_distance(a: np.ndarray | int, b: np.ndarray | int) -> np.ndarray:
     return np.minimum(d, HUE_BINS - d)
 
 
+def target_hue_lut(target_hues: np.ndarray) -> np.ndarray:
+    """(256,) bool lookup indexed by a hue image's values (`hue_image`, 0..255): True at the
+    photo-model's target hues (`PhotoModel.target_hues`, (HUE_BINS,) bool), False at every value
+    from HUE_BINS on (NO_HUE among them). The one place this table is built."""
+    lut = np.zeros(256, bool)
+    lut[:HUE_BINS] = np.asarray(target_hues, bool)[:HUE_BINS]
+    return lut
+
+
 # ----------------------------------------------------------------------------- extraction
 # Method step 1: the hue scan from the border inward. The photo's border holds the background;
 # its hue (or, for a grey/white backdrop, its brightness) distribution is estimated there, the

@@ -17,7 +17,7 @@ import cv2
 import numpy as np
 
 from photoservo.vision.ga import Region
-from photoservo.vision.photo_model import HUE_BINS, PhotoModel
+from photoservo.vision.photo_model import PhotoModel, target_hue_lut
 from photoservo.vision.genes import GeneSpace
 from photoservo.vision.rig import Rig
 
@@ -87,9 +87,7 @@ def target_mask(hue: np.ndarray, target_hues: np.ndarray, dense_px: int = 7, str
     and pull its blob's centroid off: with `above_water_sd` > 0 a region's neighbourhood must also
     hold that many binomial standard deviations more target hue than the frame's median one, the
     water's (the creature covers less than half the frame; a full neighbourhood always counts)."""
-    lut = np.zeros(256, np.uint8)
-    lut[:HUE_BINS] = np.asarray(target_hues, bool)
-    on = cv2.LUT(hue, lut)
+    on = cv2.LUT(hue, target_hue_lut(target_hues).astype(np.uint8))
     count = cv2.boxFilter(on, -1, (dense_px, dense_px), normalize=False)
     n = dense_px * dense_px
     region = on & (count >= (n + 1) // 2).astype(np.uint8)

@@ -21,7 +21,7 @@ import cv2
 import numpy as np
 
 from photoservo.vision.fitness import fitness
-from photoservo.vision.photo_model import HUE_BINS, PhotoModel
+from photoservo.vision.photo_model import PhotoModel, target_hue_lut
 from photoservo.vision.rig import Rig, project_points
 from photoservo.vision.sampling import grey, patches
 
@@ -137,9 +137,7 @@ def pairs_other_surfaces(R: np.ndarray, t: np.ndarray, alpha: float, model: Phot
 
 def on_target_hue(model: PhotoModel, hue: np.ndarray) -> np.ndarray:
     """Bool image: True where the hue image (`photo_model.hue_image`) holds one of the model's target hues."""
-    lut = np.zeros(256, bool)
-    lut[:HUE_BINS] = np.asarray(model.target_hues, bool)
-    return lut[hue]
+    return target_hue_lut(model.target_hues)[hue]
 
 
 def onto_surface(c: Any, search: Any, left_bgr: np.ndarray, right_bgr: np.ndarray, tol: float) -> Any:
