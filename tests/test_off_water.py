@@ -8,36 +8,23 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from _bench_scenes import candidate, renderer_scene
 
 from photoservo.config import load_config
-from photoservo.sim.scenes import EFFECTS, random_scene
 from photoservo.vision import detection
 from photoservo.vision.bare_parts import off_water, water_chroma
 from photoservo.vision.contour import stereo_chroma
 from photoservo.vision.estimator import estimate
 from photoservo.vision.fitness import stereo_hue
-from photoservo.vision.photo_model import build_photo_model, target_hue_lut
-from photoservo.vision.pose_search import Candidate
+from photoservo.vision.photo_model import target_hue_lut
 
 CFG = load_config()
 P = CFG.estimator
 
 
-def _renderer(seed, **kw):
-    """A renderer scene as benchmarks/accuracy.py draws it (every effect on)."""
-    sc = random_scene(seed, CFG.synthetic, CFG.photo_model, effects=tuple(EFFECTS), **kw)
-    return sc, build_photo_model(sc.photo, CFG.photo_model)
-
-
-def _pose(c: dict) -> Candidate:
-    ax, ay = c["alpha_xy_px_per_mm"]
-    return Candidate(np.array(c["rotation"]), np.array(c["position_mm"]), float(np.sqrt(ax * ay)), c["fitness"], 0,
-                     "", aspect=float(np.sqrt(ay / ax)))
-
-
 def test_a_model_inside_another_species_is_not_found(monkeypatch):
     # benchmarks/accuracy.py --first-null 300: null 349 (seed 1849), a look-alike of another species
-    sc, model = _renderer(1849, kind="squid", empty=True, distractor=True)
+    sc, model = renderer_scene(1849, kind="squid", empty=True, distractor=True)
     assert [d["kind"] for d in sc.truth["distractors"]] == ["species"]
     est = estimate(model, sc.left, sc.right, sc.rig, CFG.ga, P, CFG.fitness, seed=349)
     assert not est.found
@@ -53,7 +40,7 @@ def test_a_model_inside_another_species_is_not_found(monkeypatch):
 def test_a_creature_whose_outline_touches_something_else_is_found():
     # renderer 1239 (benchmarks/accuracy.py --first-scene 200: scene 239, a fish, another photo,
     # a look-alike in view)
-    sc, model = _renderer(1239, kind="fish", other_photo=True, distractor=True)
+    sc, model = renderer_scene(1239, kind="fish", other_photo=True, distractor=True)
     est = estimate(model, sc.left, sc.right, sc.rig, CFG.ga, P, CFG.fitness, seed=239)
     assert est.found
     truth = np.array(sc.truth["position_mm"])
@@ -62,10 +49,10 @@ def test_a_creature_whose_outline_touches_something_else_is_found():
 
 
 def test_off_water_counts_outer_points_a_colour_edge_from_the_water():
-    sc, model = _renderer(1000, kind="squid")
+    sc, model = renderer_scene(1000, kind="squid")
     frame, chroma = stereo_hue(sc.left, sc.right, CFG.fitness), stereo_chroma(sc.left, sc.right)
     est = estimate(model, sc.left, sc.right, sc.rig, CFG.ga, P, CFG.fitness, seed=0)
-    c = _pose(est.candidates[0])
+    c = candidate(est.candidates[0])
     share = off_water(c.R_model, c.position_mm, c.alpha, model, frame, chroma, sc.rig, CFG.fitness.contour_chroma)
     assert share.shape == (2,) and np.all(share <= 0.05)  # a creature on open water
     # the same outline on a pair painted another colour off the creature: all of it on another object

@@ -9,35 +9,21 @@ from __future__ import annotations
 import dataclasses
 
 import numpy as np
+from _bench_scenes import candidate, harbour_scene
 
 from photoservo.config import load_config
-from photoservo.sim import harbour
 from photoservo.vision import detection
 from photoservo.vision.contour import judged_share, stereo_chroma
 from photoservo.vision.estimator import estimate, search_frame
 from photoservo.vision.fitness import stereo_hue
-from photoservo.vision.photo_model import build_photo_model
-from photoservo.vision.pose_search import Candidate
 
 CFG = load_config()
 P = CFG.estimator
 
 
-def _harbour(seed, **kw):
-    """A harbour scene as benchmarks/accuracy.py draws it."""
-    sc = harbour.random_scene(seed, CFG.synthetic, CFG.photo_model, **kw)
-    return sc, build_photo_model(sc.photo, CFG.photo_model)
-
-
-def _pose(c: dict) -> Candidate:
-    ax, ay = c["alpha_xy_px_per_mm"]
-    return Candidate(np.array(c["rotation"]), np.array(c["position_mm"]), float(np.sqrt(ax * ay)), c["fitness"], 0,
-                     "", aspect=float(np.sqrt(ay / ax)))
-
-
 def test_a_fit_too_small_for_its_outline_to_be_judged_is_not_found_on_empty_water():
     # benchmarks/accuracy.py --generator harbour --first-null 300: null 312 (seed 1812), empty
-    sc, model = _harbour(1812, kind="fish", empty=True)
+    sc, model = harbour_scene(1812, kind="fish", empty=True)
     assert sc.truth["distractors"] == []
     frame = search_frame(stereo_hue(sc.left, sc.right, CFG.fitness), model, sc.left, sc.right, P)
     assert frame.chroma is not None  # the contour regime: the water carries the fish's hues
@@ -47,14 +33,14 @@ def test_a_fit_too_small_for_its_outline_to_be_judged_is_not_found_on_empty_wate
     # what the rule takes away: a contrast and an outline that pass, nothing of the outline judged
     assert first["contrast"] >= P.min_contrast and first["outer_on_target"] <= P.max_outer_on_target
     assert first["outline_judged"] < detection.MIN_JUDGED_SHARE
-    c = _pose(first)
+    c = candidate(first)
     assert np.all(judged_share(c.R_model, c.position_mm, c.alpha, model, frame, frame.chroma, sc.rig,
                                CFG.fitness) == 0.0)
 
 
 def test_a_many_hued_fish_the_contour_rule_can_judge_is_found():
     # benchmarks/accuracy.py --many-hued: fish 0 (seed 1700), estimated with seed 0, within 5 % of its depth
-    sc, model = _harbour(1700, kind="fish", many_hued=True)
+    sc, model = harbour_scene(1700, kind="fish", many_hued=True)
     est = estimate(model, sc.left, sc.right, sc.rig, CFG.ga, P, CFG.fitness, seed=0)
     off = np.array(est.position_mm if est.found else np.full(3, np.inf)) - sc.truth["position_mm"]
     assert np.linalg.norm(off) < 0.05 * sc.truth["position_mm"][2]
@@ -62,13 +48,13 @@ def test_a_many_hued_fish_the_contour_rule_can_judge_is_found():
 
 
 def test_the_hue_regime_does_not_judge_the_outline():
-    sc, model = _harbour(1000, kind="squid")
+    sc, model = harbour_scene(1000, kind="squid")
     frame = stereo_hue(sc.left, sc.right, CFG.fitness)
     assert search_frame(frame, model, sc.left, sc.right, P).chroma is None
     est = estimate(model, sc.left, sc.right, sc.rig, CFG.ga, P, CFG.fitness, seed=0)
     assert all(c["outline_judged"] is None for c in est.candidates)
     # judged_share itself on this pair's chroma: a fit shrunk 20x has no pair far enough apart to judge
-    c = _pose(est.candidates[0])
+    c = candidate(est.candidates[0])
     chroma = stereo_chroma(sc.left, sc.right)
     small = judged_share(c.R_model, c.position_mm, 20 * c.alpha, model, dataclasses.replace(frame, chroma=chroma),
                          chroma, sc.rig, CFG.fitness)

@@ -1,0 +1,33 @@
+"""Scenes as benchmarks/accuracy.py draws them (seed 1000 + i), and a candidate back from an estimate's
+JSON, for the tests of detection's rules on benchmark scenes."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from photoservo.config import load_config
+from photoservo.sim import harbour
+from photoservo.sim.scenes import EFFECTS, random_scene
+from photoservo.vision.photo_model import build_photo_model
+from photoservo.vision.pose_search import Candidate
+
+CFG = load_config()
+
+
+def harbour_scene(seed, **kw):
+    """A harbour scene as benchmarks/accuracy.py draws it, with its photo-model."""
+    sc = harbour.random_scene(seed, CFG.synthetic, CFG.photo_model, **kw)
+    return sc, build_photo_model(sc.photo, CFG.photo_model)
+
+
+def renderer_scene(seed, **kw):
+    """A renderer scene as benchmarks/accuracy.py draws it (every effect on), with its photo-model."""
+    sc = random_scene(seed, CFG.synthetic, CFG.photo_model, effects=tuple(EFFECTS), **kw)
+    return sc, build_photo_model(sc.photo, CFG.photo_model)
+
+
+def candidate(c: dict) -> Candidate:
+    """The pose of a candidate of `Estimate.candidates` (its JSON) as a `Candidate`."""
+    ax, ay = c["alpha_xy_px_per_mm"]
+    return Candidate(np.array(c["rotation"]), np.array(c["position_mm"]), float(np.sqrt(ax * ay)), c["fitness"], 0,
+                     "", aspect=float(np.sqrt(ay / ax)))
