@@ -20,7 +20,7 @@ import numpy as np
 
 from photoservo.vision.appearance import StereoGrey, appearance
 from photoservo.vision.contour import StereoChroma
-from photoservo.vision.detection import MAX_OFF_WATER, MIN_JUDGED_SHARE, Detection, detect
+from photoservo.vision.detection import MAX_BLOB_BEYOND, MAX_OFF_WATER, MIN_JUDGED_SHARE, Detection, detect
 from photoservo.vision.fitness import StereoHue, fitness, point_weight
 from photoservo.vision.parts import absent_parts
 from photoservo.vision.photo_model import PhotoModel
@@ -457,7 +457,8 @@ def parted_turns(results: list[tuple[Detection, Candidate]], searches: dict[str,
     out = list(results)
     for k, (d, c) in enumerate(results):
         excused = (d.outer_on_target <= p.max_outer_if_appearance
-                   and bool(np.all(np.asarray([d.appearance, d.body_layout]) >= p.min_appearance)))
+                   and bool(np.all(np.asarray([d.appearance, d.body_layout]) >= p.min_appearance))
+                   and not d.blob_beyond > MAX_BLOB_BEYOND)  # nan: not measured, not a reason
         if (d.passed or d.contrast < p.min_contrast or not (d.outer_on_target <= p.max_outer_on_target or excused)
                 or d.outline_judged < MIN_JUDGED_SHARE or d.off_water > MAX_OFF_WATER or not np.isfinite(c.fitness)):
             continue  # passes, or fails on more than its parts (nan outline cues: not measured, not a reason)
