@@ -6,6 +6,9 @@ decides whether the best is the creature.
 Acquisition (`estimate`): the target's hues (the model's `target_hues`) are segmented in both
 images; blobs are paired along the epipolar lines and triangulated, which gives (u, v, q), the
 apparent scale s from the blob area and two heading hypotheses from the blob's principal axis.
+Groups of pieces seed too: pairs near each other (`group_pairs`), one image's pieces matched with
+the other's whole blob (`split_pairs`), and a foam band's pieces taken together where some paired
+on their own and some did not (`bridged_pairs`: the gap between them is foam, `parts.foam_marked`).
 Each pair seeds one GA island searching a window around it; an optional unseeded island
 searches the whole volume. Every island stops when converged (`Convergence`); each island's best
 is a candidate, tested by `detect` (`Detection`: the fitness with the cameras combined by their
@@ -60,15 +63,22 @@ from photoservo.vision.photo_model import HUE_BINS, PhotoModel
 from photoservo.vision.pose_search import Candidate, PoseSearch, drive
 from photoservo.vision.rig import Rig
 from photoservo.vision.seeding import (
+    BlobPair,
     ModelShape,
     group_pairs,
     match_blobs,
     seed_genes,
+    bridged_pairs,
     split_pairs,
     stereo_blobs,
     target_mask,
 )
 from photoservo.vision.silhouette import distinctive_weight, silhouette_pairs
+
+
+# the spawn key of the bridged islands' random streams (`acquisition`): a child of the seed that the
+# acquisition's own spawns (a few dozen) never reach, so that the other islands draw as without them
+BRIDGED_STREAMS = 1 << 20
 
 
 @dataclass(frozen=True)
@@ -119,6 +129,7 @@ class EstimatorParams:
     outline_grow: float  # when the first candidate fails, one failing its outline alone is tried grown by sqrt(this)
     # and this (`grown_outlines`; 1 = off)
     parted_turns: bool  # ...and one failing its parts alone re-fitted at quarter turns (`candidates.parted_turns`)
+    foam_bridge: bool  # seed islands also from pieces joined across foam, some paired alone (`seeding.bridged_pairs`)
     passed_standing_ratio: float  # a candidate that passes ranks first when it stands >= this x the top, which fails
     twin_appearance: bool  # let the appearance cue choose between the first candidate and its head-to-tail twin
     twin_min_appearance: float  # ...the twin is taken when its appearance score is at least this,
@@ -214,11 +225,16 @@ class Estimate:
 
 def _islands(model: PhotoModel, rig: Rig, frame: StereoHue, ga_params: GAParams, p: EstimatorParams,
              fit_params: FitnessParams, ss: np.random.SeedSequence,
-             seeded_only: bool = False) -> list[tuple[str, PoseSearch]]:
+             seeded_only: bool = False, foam: StereoHue | None = None,
+             bridge_ss: np.random.SeedSequence | None = None) -> list[tuple[str, PoseSearch]]:
     """The acquisition's GA islands (module docstring): one per seed pair, at most
     max_candidates, largest first; an unseeded one over the whole volume when asked or when
-    nothing seeds (never with `seeded_only`)."""
+    nothing seeds (never with `seeded_only`); then, with `foam` (the frame with its foam marked,
+    `parts.foam_marked`), one per pair of pieces joined across foam (`seeding.bridged_pairs`, at
+    most max_candidates, named "bridged k"), on streams of `bridge_ss`: the other islands are
+    those of a pair without such pieces."""
     islands: list[tuple[str, PoseSearch]] = []
+    bridged: list[BlobPair] = []
     if p.seeding and p.genes == "image":
         shape = ModelShape.of(model)
         if hues_everywhere(frame, model, p):
@@ -233,22 +249,33 @@ def _islands(model: PhotoModel, rig: Rig, frame: StereoHue, ga_params: GAParams,
         else:
             left, right = stereo_blobs(frame.left, frame.right, model, p)
             pairs = match_blobs(left, right, rig, p)
+            if foam is not None:  # a foam band's pieces paired unevenly, taken together
+                bridged = bridged_pairs(left, right, pairs, foam, model.target_hues, rig, p)[: p.max_candidates]
             # groups of pieces (a creature split by foam: in both images, or in one only) beside
             # the single blobs, largest first
             pairs = sorted(group_pairs(pairs, p) + split_pairs(left, right, pairs, rig, p) + pairs,
                            key=lambda bp: -bp.left.area)
         pairs = pairs[: p.max_candidates]
         for i, (pair, s) in enumerate(zip(pairs, ss.spawn(len(pairs)))):
-            rng = np.random.default_rng(s)
-            search = PoseSearch(model, rig, frame, ga_params, p, fit_params, rng)
-            seeds, region = seed_genes(pair, shape, search.space, rng, ga_params.population)
-            search.ga.set_region(region)
-            search.ga.genes[:] = seeds
-            islands.append((f"blob {i}", search))
+            islands.append((f"blob {i}", _seeded(pair, shape, s, model, rig, frame, ga_params, p, fit_params)))
     if (p.global_island or not islands) and not seeded_only:
         rng = np.random.default_rng(ss.spawn(1)[0])
         islands.append(("global", PoseSearch(model, rig, frame, ga_params, p, fit_params, rng)))
+    if bridged and bridge_ss is not None:
+        for i, (pair, s) in enumerate(zip(bridged, bridge_ss.spawn(len(bridged)))):
+            islands.append((f"bridged {i}", _seeded(pair, shape, s, model, rig, frame, ga_params, p, fit_params)))
     return islands
+
+
+def _seeded(pair: BlobPair, shape: ModelShape, s: np.random.SeedSequence, model: PhotoModel, rig: Rig,
+            frame: StereoHue, ga_params: GAParams, p: EstimatorParams, fit_params: FitnessParams) -> PoseSearch:
+    """One island seeded from a blob pair (`seed_genes`) on the random stream `s`."""
+    rng = np.random.default_rng(s)
+    search = PoseSearch(model, rig, frame, ga_params, p, fit_params, rng)
+    seeds, region = seed_genes(pair, shape, search.space, rng, ga_params.population)
+    search.ga.set_region(region)
+    search.ga.genes[:] = seeds
+    return search
 
 
 def hues_everywhere(frame: StereoHue, model: PhotoModel, p: EstimatorParams) -> bool:
@@ -294,25 +321,34 @@ def acquisition(model: PhotoModel, left_bgr: np.ndarray, right_bgr: np.ndarray, 
     (the ranking has nothing to choose; the answer is the same island's, refined); the rest of
     the acquisition and its answer are unchanged."""
     ss = np.random.SeedSequence(seed)
+    bridge_ss = np.random.SeedSequence(seed, spawn_key=(BRIDGED_STREAMS,))  # the bridged islands' own streams
     frame = search_frame(frame, model, left_bgr, right_bgr, p)
-    islands = _islands(model, rig, frame, ga_params, p, fit_params, ss, seeded_only)
+    # the pair's brightness and its foam (`parts.foam_marked`), read by the seeding and by every detection
+    value = stereo_value(left_bgr, right_bgr)
+    foam = foam_marked(frame, value.left, value.right) if p.foam_part_share < 1.0 or p.foam_bridge else None
+    islands = _islands(model, rig, frame, ga_params, p, fit_params, ss, seeded_only,
+                       foam=foam if p.foam_bridge else None, bridge_ss=bridge_ss)
     if not islands:
         return Acquired([], [])
-    streams = ss.spawn(len(islands))  # the islands' turned twins' own random streams
+    n_bridged = sum(name.startswith("bridged") for name, _ in islands)
+
+    def spawn() -> list[np.random.SeedSequence]:  # one stream per island; a bridged island's from its own sequence
+        return ss.spawn(len(islands) - n_bridged) + bridge_ss.spawn(n_bridged)
+
+    streams = spawn()  # the islands' turned twins' own random streams
     firsts = []
     for _, search in islands:
         firsts.append((yield from search.steps()))
     parts = model_parts(model.inner_uv)
     yield from turned_islands(firsts, islands, streams, parts, p)
     if frame.chroma is None:  # where hue bounds the target: the islands near the lead on their stereo planes
-        yield from stereo_islands(firsts, islands, ss.spawn(len(islands)), left_bgr, right_bgr, parts, p)
+        yield from stereo_islands(firsts, islands, spawn(), left_bgr, right_bgr, parts, p)
     # what every candidate's detection reads of the pair, computed once per acquisition
-    value = stereo_value(left_bgr, right_bgr)
     looks = dict(grey_frame=stereo_grey(left_bgr, right_bgr), value_frame=value,
                  parts=parts, chroma=frame.chroma or stereo_chroma(left_bgr, right_bgr),
                  weight=(distinctive_weight(frame.left, frame.right, model)
                          if p.outline_distinctive and frame.chroma is None else None),
-                 foam=foam_marked(frame, value.left, value.right) if p.foam_part_share < 1.0 else None)
+                 foam=foam if p.foam_part_share < 1.0 else None)
     # the water's colour in each image, for detection's outline on another object (where hue bounds the target)
     looks["water"] = stereo_water(model, frame, looks["chroma"]) if frame.chroma is None else None
     if provisional is not None and len(islands) == 1 and np.isfinite(firsts[0].fitness):

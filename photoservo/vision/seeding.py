@@ -16,9 +16,11 @@ from typing import TYPE_CHECKING
 import cv2
 import numpy as np
 
+from photoservo.vision.fitness import StereoHue
 from photoservo.vision.ga import Region
-from photoservo.vision.photo_model import PhotoModel, target_hue_lut
 from photoservo.vision.genes import GeneSpace
+from photoservo.vision.parts import FOAM
+from photoservo.vision.photo_model import PhotoModel, target_hue_lut
 from photoservo.vision.rig import Rig
 
 if TYPE_CHECKING:
@@ -232,6 +234,71 @@ def split_pairs(left: list[Blob], right: list[Blob], pairs: list[BlobPair], rig:
             u = [union(group)]
             out += match_blobs(other, u, rig, params) if flip else match_blobs(u, other, rig, params)
     return sorted(out, key=lambda bp: -bp.left.area)
+
+
+# two pieces of one image lie on either side of foam when at least this share of the pixels off the target's
+# hues on the line between their centroids are foam (`parts.foam_marked`): across a band over the creature
+# they are (renderer held-out 2: 0.53-1.00 off a foam band's pale, hued edge), across water none are (0.00)
+FOAM_GAP_SHARE = 0.5
+
+
+def foam_gap(a: Blob, b: Blob, marked: np.ndarray, target_hues: np.ndarray) -> bool:
+    """Whether the gap between two blobs of one image is foam: of the pixels on the line between
+    their centroids in `marked` (a hue image with foam marked `parts.FOAM`), those off the
+    target's hues are foam in at least `FOAM_GAP_SHARE` (and some are: touching pieces are one blob)."""
+    n = int(math.ceil(float(np.linalg.norm(b.centroid - a.centroid)))) + 1
+    h, w = marked.shape
+    xs = np.clip(np.rint(np.linspace(a.centroid[0], b.centroid[0], n)).astype(int), 0, w - 1)
+    ys = np.clip(np.rint(np.linspace(a.centroid[1], b.centroid[1], n)).astype(int), 0, h - 1)
+    line = marked[ys, xs]
+    off = line[~target_hue_lut(target_hues)[line]]
+    return bool(len(off)) and float(np.mean(off == FOAM)) >= FOAM_GAP_SHARE
+
+
+def bridged_pairs(left: list[Blob], right: list[Blob], pairs: list[BlobPair], foam: StereoHue,
+                  target_hues: np.ndarray, rig: Rig, params: EstimatorParams) -> list[BlobPair]:
+    """A creature cut by a foam band whose pieces pair unevenly: the large piece pairs on its own,
+    a piece across the band does not (the two images cut it differently: areas more than 2.5x
+    apart, or the other image's pieces merged), so `group_pairs` has no second pair to group and
+    `split_pairs` skips the group (a piece paired). Its island then takes scale and heading from
+    the large piece alone: half a crab cut across its long side is long the other way, a quarter
+    turn off (renderer held-out 2 1202, 1220, 1256). Here each image's near pieces (`group_reach`)
+    whose gaps are foam (`foam_gap`; `foam`: the pair's hue frame with foam marked) form groups;
+    a group of which some pieces paired on their own and some did not is taken together (`union`)
+    and matched with what the other image holds whole: its own such groups taken together and
+    its blobs in no group. Pieces near each other across water (two creatures, a creature beside
+    a look-alike) are not joined. Pairs already in `pairs` or `group_pairs` are left out. Largest
+    first."""
+    def same(a: Blob, b: Blob) -> bool:
+        return a.area == b.area and np.array_equal(a.centroid, b.centroid)
+
+    def groups_of(blobs: list[Blob], marked: np.ndarray) -> list[list[Blob]]:
+        n = len(blobs)
+        near = np.zeros((n, n), bool)
+        for i in range(n):
+            for j in range(i + 1, n):
+                a, b = blobs[i], blobs[j]
+                near[i, j] = near[j, i] = (
+                    float(np.linalg.norm(a.centroid - b.centroid)) <= params.group_reach * (a.half_length + b.half_length)
+                    and foam_gap(a, b, marked, target_hues))
+        return [[blobs[k] for k in c] for c in components(near)]
+
+    sides = []
+    for blobs, marked, paired in ((left, foam.left, [bp.left for bp in pairs]),
+                                  (right, foam.right, [bp.right for bp in pairs])):
+        groups = groups_of(blobs, marked)
+        own = [[any(same(b, m) for m in paired) for b in g] for g in groups]
+        uneven = [union(g) for g, o in zip(groups, own) if any(o) and not all(o)]
+        whole = [union(g) for g in groups] + [b for b in blobs if not any(same(b, m) for g in groups for m in g)]
+        sides.append((uneven, whole))
+    (uneven_l, whole_l), (uneven_r, whole_r) = sides
+    out = ((match_blobs(uneven_l, whole_r, rig, params) if uneven_l and whole_r else [])
+           + (match_blobs(whole_l, uneven_r, rig, params) if whole_l and uneven_r else []))
+    kept: list[BlobPair] = []
+    for bp in out:
+        if not any(same(bp.left, h.left) and same(bp.right, h.right) for h in pairs + group_pairs(pairs, params) + kept):
+            kept.append(bp)
+    return sorted(kept, key=lambda bp: -bp.left.area)
 
 
 def group_pairs(pairs: list[BlobPair], params: EstimatorParams) -> list[BlobPair]:
