@@ -328,7 +328,9 @@ class Detection:
     nan elsewhere), at most `MAX_OFF_WATER` to pass. `blob_beyond`: where hue bounds the target and
     the outline passes by the appearance excuse alone, the smaller camera's share of the footprint by
     which the blob of target hue under the candidate goes on past its outline (`footprint.blob_beyond`;
-    nan where not measured), at most `MAX_BLOB_BEYOND` for the excuse to hold."""
+    nan where not measured), at most `MAX_BLOB_BEYOND` for the excuse to hold. `on_bare_water`: the
+    bare-water rule rejects it (two or more parts absent, one of them on bare water: a float or
+    another creature under the model, not the creature with a part hidden; `candidates.ranked`)."""
 
     score: float
     null_level: float
@@ -345,6 +347,7 @@ class Detection:
     outline_judged: float = math.nan
     off_water: float = math.nan
     blob_beyond: float = math.nan
+    on_bare_water: bool = False
 
 
 def appearance_pair(c: Candidate, model: PhotoModel, frame: StereoHue, grey_frame: StereoGrey,
@@ -417,9 +420,10 @@ def detect(c: Candidate, model: PhotoModel, frame: StereoHue, rig: Rig, fit_para
     elsewhere = (float(off_water(c.R_model, c.position_mm, c.alpha, model, frame, chroma, rig,
                                  fit_params.contour_chroma, water).min()) if frame.chroma is None and chroma is not None
                  else math.nan)
+    on_bare_water = n_absent >= 2 and bare >= 1
     passed = (contrast >= p.min_contrast and (outer <= p.max_outer_on_target or excused)
               and not absent > p.max_absent_parts  # nan (no part on hue): not a reason to reject
-              and not (n_absent >= 2 and bare >= 1)
+              and not on_bare_water
               and not judged < MIN_JUDGED_SHARE  # nan (the hue regime): not judged
               and not elsewhere > MAX_OFF_WATER)  # nan (the contour regime, no chroma): not judged
     outline = 1.0 if excused else 1.0 / (1.0 + math.exp(-(p.max_outer_on_target - outer) / 0.02))
@@ -427,4 +431,4 @@ def detect(c: Candidate, model: PhotoModel, frame: StereoHue, rig: Rig, fit_para
                      confidence=confidence(contrast, p) * outline, threshold=q + p.min_contrast * (1.0 - q),
                      standing=standing, appearance=look[0], body_layout=look[1], absent_parts=absent,
                      bare_parts=bare, outline_judged=judged,
-                     off_water=elsewhere, blob_beyond=beyond)
+                     off_water=elsewhere, blob_beyond=beyond, on_bare_water=bool(on_bare_water))

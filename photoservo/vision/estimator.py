@@ -22,7 +22,8 @@ tilt; the per-axis size). The candidate that stands out most from what a search 
 finds elsewhere at its scale (`Detection.standing`) is the estimate, the others the candidate
 list, and `found` is whether it passed (a fit on a small spot of the target's colour may pass
 while the creature itself stands out more: then the creature is the estimate, or nothing is) —
-unless it fails and one that passes stands nearly as high (`candidates.ranked`). When the first
+unless it fails and one that passes stands nearly as high as the best failing for another reason than
+parts on bare water (`candidates.ranked`). When the first
 still fails after its head-to-tail twin was tried, each candidate that fails its outline test
 alone is tried grown (`candidates.grown_outlines`: a fit shrunk inside the creature spills onto
 the creature itself), then each that fails its parts alone is re-fitted at quarter turns
