@@ -76,6 +76,9 @@ from photoservo.vision.seeding import (
 )
 from photoservo.vision.silhouette import distinctive_weight, silhouette_pairs
 
+GROWN_STREAMS = 1 << 20  # the hue layout's grown islands' streams: ss's spawn key + this (`_islands`)
+GROWN = "grown"  # their names' start
+
 
 # the spawn key of the bridged islands' random streams (`acquisition`): a child of the seed that the
 # acquisition's own spawns (a few dozen) never reach, so that the other islands draw as without them
@@ -233,19 +236,22 @@ def _islands(model: PhotoModel, rig: Rig, frame: StereoHue, ga_params: GAParams,
     nothing seeds (never with `seeded_only`); then, with `foam` (the frame with its foam marked,
     `parts.foam_marked`), one per pair of pieces joined across foam (`seeding.bridged_pairs`, at
     most max_candidates, named "bridged k"), on streams of `bridge_ss`: the other islands are
-    those of a pair without such pieces."""
+    those of a pair without such pieces. Where the hue layout seeds (never with bridged islands),
+    also one per grown box (`hue_layout.layout_pairs`, at most `GROWN_ISLANDS`, named "grown k"),
+    last, on streams of their own."""
     islands: list[tuple[str, PoseSearch]] = []
     bridged: list[BlobPair] = []
+    grown: list[BlobPair] = []
+    shape = ModelShape.of(model)
     if p.seeding and p.genes == "image":
-        shape = ModelShape.of(model)
         if hues_everywhere(frame, model, p):
             # the creature's hues are everywhere (a many-hued creature, the water's hue among its
             # own; not target hues scattered by noise over water at the edge of the tolerance,
             # which target_mask leaves out): seed from where the photo's hue layout agrees (vision/hue_layout.py)
             # and from where the photo's silhouette fits the hues the creature holds more of
             # than the frame does (vision/silhouette.py), alternately
-            both = (silhouette_pairs(frame.left, frame.right, model, rig, p),
-                    layout_pairs(frame.left, frame.right, model, shape.area, rig, p))
+            layout, grown = layout_pairs(frame.left, frame.right, model, shape.area, rig, p)
+            both = (silhouette_pairs(frame.left, frame.right, model, rig, p), layout)
             pairs = [bp for k in range(max(map(len, both))) for src in both for bp in src[k:k + 1]]
         else:
             left, right = stereo_blobs(frame.left, frame.right, model, p)
@@ -265,6 +271,12 @@ def _islands(model: PhotoModel, rig: Rig, frame: StereoHue, ga_params: GAParams,
     if bridged and bridge_ss is not None:
         for i, (pair, s) in enumerate(zip(bridged, bridge_ss.spawn(len(bridged)))):
             islands.append((f"bridged {i}", _seeded(pair, shape, s, model, rig, frame, ga_params, p, fit_params)))
+    # the hue layout's grown boxes (a single-hued target agrees best on a small box inside it:
+    # hue_layout.agreement_peaks), islands of their own after the others, on streams of their own
+    # (the other islands' and everything ss spawns later as without them)
+    extra = np.random.SeedSequence(ss.entropy, spawn_key=(*ss.spawn_key, GROWN_STREAMS))
+    for i, (pair, s) in enumerate(zip(grown, extra.spawn(len(grown)))):
+        islands.append((f"{GROWN} {i}", _seeded(pair, shape, s, model, rig, frame, ga_params, p, fit_params)))
     return islands
 
 
@@ -336,12 +348,19 @@ def acquisition(model: PhotoModel, left_bgr: np.ndarray, right_bgr: np.ndarray, 
     def spawn() -> list[np.random.SeedSequence]:  # one stream per island; a bridged island's from its own sequence
         return ss.spawn(len(islands) - n_bridged) + bridge_ss.spawn(n_bridged)
 
+    # the hue layout's grown islands (`_islands`, last; never with bridged ones) take no part in what
+    # the others do as without them: their turned twins apart, and the leading one of them refined
+    # apart (below)
+    n = sum(not name.startswith(GROWN) for name, _ in islands)
     streams = spawn()  # the islands' turned twins' own random streams
     firsts = []
     for _, search in islands:
         firsts.append((yield from search.steps()))
     parts = model_parts(model.inner_uv)
-    yield from turned_islands(firsts, islands, streams, parts, p)
+    for lo, hi in ((0, n), (n, len(islands))):
+        some = firsts[lo:hi]
+        yield from turned_islands(some, islands[lo:hi], streams[lo:hi], parts, p)
+        firsts[lo:hi] = some
     if frame.chroma is None:  # where hue bounds the target: the islands near the lead on their stereo planes
         yield from stereo_islands(firsts, islands, spawn(), left_bgr, right_bgr, parts, p)
     # what every candidate's detection reads of the pair, computed once per acquisition
@@ -356,11 +375,22 @@ def acquisition(model: PhotoModel, left_bgr: np.ndarray, right_bgr: np.ndarray, 
         provisional.append((detect(firsts[0], model, frame, rig, fit_params, p, seed=seed, **looks),
                             dataclasses.replace(firsts[0], source=islands[0][0])))
     # the leading island's fit is refined (`refined`), before detection
-    lead = int(np.argmax([c.fitness for c in firsts]))
-    firsts[lead] = yield from refined(islands[lead][1], firsts[lead], frame, left_bgr, right_bgr, p)
+    lead = int(np.argmax([c.fitness for c in firsts[:n]])) if n else None
+    if n < len(islands):  # the best grown island fitting better than the others' lead: refined too
+        best = n + int(np.argmax([c.fitness for c in firsts[n:]]))
+        grown_lead = best if lead is None or firsts[best].fitness > firsts[lead].fitness else None
+    else:
+        grown_lead = None
+    for k in (lead, grown_lead):
+        if k is not None:
+            firsts[k] = yield from refined(islands[k][1], firsts[k], frame, left_bgr, right_bgr, p)
+    # a grown island's fit is a candidate only where it fits better than every other island's: else
+    # the others' candidates as without it (the motorcycle's crate at 0.6x seed 31: a grown fit 26 %
+    # too large, 0.925 against the others' 0.934, stood higher and became the answer)
+    bar = max((c.fitness for c in firsts[:n]), default=-np.inf)
     results = []
-    for (name, search), c in zip(islands, firsts):
-        if np.isfinite(c.fitness):
+    for k, ((name, search), c) in enumerate(zip(islands, firsts)):
+        if np.isfinite(c.fitness) and (k < n or c.fitness > bar):
             results.append((detect(c, model, frame, rig, fit_params, p, seed=seed, **looks),
                             dataclasses.replace(c, source=name)))
     results = ranked(results, p.passed_standing_ratio)
