@@ -110,3 +110,33 @@ def test_three_targets_three_variants_with_truth_on_the_target(cases):
         assert by[(t, "scaled")] == pytest.approx(by[(t, "left")], rel=0.05)
         # the pot from the right: the dry leaf hanging in front of its rim stands 10 px further out
         assert by[(t, "right")] == pytest.approx(by[(t, "left")], rel=0.08)
+
+
+@needs_aloe
+def test_the_pot_is_seeded_at_its_size():
+    """The terracotta pot cut from the left image: its hues fill most of the backdrop's motifs, so
+    seeds come from the hue layout (vision/hue_layout.py). A 30-px box inside the pot agrees best
+    and every layout peak lies on one (the pot 142 px; an island's window reaches 2x above its
+    seed: every fit 3-8x too small). The peaks stay as they were, and the grown boxes (the largest
+    side agreeing as well nearby) seed islands of their own: one at the pot's depth whose window
+    reaches its size. Seed 1 from the default volume (depth 0.5-5 m): found, at its depth and size."""
+    from photoservo.vision.estimator import estimate
+    from photoservo.vision.fitness import stereo_hue
+    from photoservo.vision.hue_layout import layout_pairs
+    from photoservo.vision.seeding import ModelShape
+
+    c, = real_cases(CFG.photo_model, scale=SCALE, targets=("pot",), variants=("left",), pair="aloe")
+    tr, shape = c.truth, ModelShape.of(c.model)
+    frame = stereo_hue(c.left, c.right, CFG.fitness)
+    pairs, grown = layout_pairs(frame.left, frame.right, c.model, shape.area, c.rig, CFG.estimator)
+    # the pot's apparent side in the left image: the model's side at the true scale (f / Z px per mm
+    # in the image over alpha px per mm in the photo)
+    side = np.sqrt(shape.area) * c.rig.left.K[0, 0] / tr["distance_mm"] / tr["alpha_px_per_mm"]
+    assert 135 < side < 150
+    assert pairs and all(np.sqrt(bp.left.area) < 0.25 * side for bp in pairs)
+    assert any(abs(bp.position_mm[2] / tr["distance_mm"] - 1) < 0.05 and 2 * np.sqrt(bp.left.area) > side
+               for bp in grown)
+    est = estimate(c.model, c.left, c.right, c.rig, CFG.ga, CFG.estimator, CFG.fitness, seed=1)
+    assert est.found
+    assert abs(est.position_mm[2] / tr["distance_mm"] - 1) < 0.05
+    assert abs(tr["alpha_px_per_mm"] / est.alpha_px_per_mm - 1) < 0.15
