@@ -76,13 +76,14 @@ from photoservo.vision.seeding import (
 )
 from photoservo.vision.silhouette import distinctive_weight, silhouette_pairs
 
-GROWN_STREAMS = 1 << 20  # the hue layout's grown islands' streams: ss's spawn key + this (`_islands`)
-GROWN = "grown"  # their names' start
-
 
 # the spawn key of the bridged islands' random streams (`acquisition`): a child of the seed that the
 # acquisition's own spawns (a few dozen) never reach, so that the other islands draw as without them
 BRIDGED_STREAMS = 1 << 20
+# the hue layout's grown islands' (`_islands`): the same child, as the two never seed one acquisition
+# (bridged islands where hue bounds the target, grown ones where it does not)
+GROWN_STREAMS = BRIDGED_STREAMS
+GROWN = "grown"  # the grown islands' names' start
 
 
 @dataclass(frozen=True)
