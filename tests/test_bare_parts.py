@@ -44,22 +44,6 @@ def _pose(c: dict) -> Candidate:
                      "", aspect=float(np.sqrt(ay / ax)))
 
 
-def _found_within_5(sc, model, seed):
-    """The estimate with the benchmark's seed, found within 5 % of the distance."""
-    est = estimate(model, sc.left, sc.right, sc.rig, CFG.ga, P, CFG.fitness, seed=seed)
-    assert est.found
-    truth = np.array(sc.truth["position_mm"])
-    assert np.linalg.norm(np.array(est.position_mm) - truth) / truth[2] < 0.05
-    return est
-
-
-def _flags_at(sc, model, c: dict):
-    """`bare_flags` at an estimate's candidate (absent per camera, bare)."""
-    p = _pose(c)
-    frame, grey, chroma = _looks(sc)
-    return bare_flags(p.R_model, p.position_mm, p.alpha, model, frame, grey, chroma, sc.rig, model_parts(model.inner_uv))
-
-
 def test_absent_flags_are_the_parts_absent_share_counts():
     labels = np.repeat(np.arange(4), 10)
     hued = np.ones((2, 40), bool)
@@ -124,35 +108,15 @@ def test_a_squid_whose_thin_arms_blur_into_the_water_keeps_them():
     # harbour 1018 (same photo, split by foam): two arm parts absent, their pixels half way from the
     # water's colour to the body's; found as before
     sc, model = _harbour(1018, kind="squid", foam_split=True)
-    est = _found_within_5(sc, model, seed=18)
-    absent, bare = _flags_at(sc, model, est.candidates[0])
-    assert absent.sum(axis=1).max() == 2 and not bare.any()  # the worse camera's count
-    # the absent parts land off the target's hues in at least one camera: the check judged them
+    est = estimate(model, sc.left, sc.right, sc.rig, CFG.ga, P, CFG.fitness, seed=18)
+    assert est.found
+    truth = np.array(sc.truth["position_mm"])
+    assert np.linalg.norm(np.array(est.position_mm) - truth) / truth[2] < 0.05
     c = _pose(est.candidates[0])
-    h = inner_hues(c.R_model, c.position_mm, c.alpha, model, stereo_hue(sc.left, sc.right, CFG.fitness), sc.rig)
+    frame, grey, chroma = _looks(sc)
+    labels = model_parts(model.inner_uv)
+    n_absent, bare = bare_parts(c.R_model, c.position_mm, c.alpha, model, frame, grey, chroma, sc.rig, labels)
+    assert n_absent == 2 and bare == 0
+    # the absent parts land off the target's hues in at least one camera: the check judged them
+    h = inner_hues(c.R_model, c.position_mm, c.alpha, model, frame, sc.rig)
     assert (h < HUE_BINS).mean() > 0.5
-
-
-def test_another_individuals_squid_with_one_arm_on_bare_water_is_found():
-    # harbour 1201 (benchmarks/accuracy.py --generator harbour --first-scene 200): another individual's
-    # squid, one arm lying elsewhere than the photo's. Its fit 1.5 % off has that arm's part on bare
-    # water and a second part absent in the left camera only, which the right camera sees on the
-    # body's hue: one part missing from the pair, not two (before: rejected, not found)
-    sc, model = _harbour(1201, kind="squid", other_photo=True)
-    est = _found_within_5(sc, model, seed=201)
-    first = est.candidates[0]  # as detection judged it (before the answer is turned onto the stereo plane)
-    assert first["absent_parts"] == pytest.approx(2 / 12, abs=1e-3) and first["bare_parts"] == 1
-
-
-def test_a_leaf_under_a_squid_model_too_small_to_resolve_is_not_found():
-    # harbour null 2092 (benchmarks/accuracy.py --generator harbour --first-null 500): empty water with
-    # debris; a squid's model fitted onto a leaf at an apparent pitch under a pixel, one arm part on bare
-    # water and a second absent in the left camera only. At that scale a part is a handful of pixels and
-    # the worse camera's count decides (bare_parts.RESOLVED_PX): not found
-    sc, model = _harbour(2092, kind="squid", empty=True)
-    est = estimate(model, sc.left, sc.right, sc.rig, CFG.ga, P, CFG.fitness, seed=592)
-    assert not est.found
-    first = est.candidates[0]
-    assert first["absent_parts"] == pytest.approx(2 / 12, abs=1e-3) and first["bare_parts"] >= 1
-    absent, _ = _flags_at(sc, model, first)
-    assert (absent[0] & absent[1]).sum() == 1  # the pair's count alone would have let it pass

@@ -30,19 +30,8 @@ and on bare water when it does so in both cameras (a camera that sees it present
 — under `MIN_WATER` water points or `MIN_BODY` body points, or a body no more than `MIN_SPAN`
 colour units from the water — says it is not bare). Detection (`vision/detection.py`) rejects a
 candidate with two or more parts absent of which any lies on bare water: one part on water is
-another individual's limb, two absent with a trace of colour a blurred pair of arms, two absent with
-one bare a model wider than what lies under it. Absent here means absent in both cameras, where the
-image resolves the photo-model's sampling (its apparent pitch, the photo's sampling interval at the
-candidate's scale, at least `RESOLVED_PX`): a part one camera sees on a target hue is under the
-model, and the pair judges it as it judges bare water, in both cameras (harbour 1201 and 1453, held-
-out 2 and 4, other individuals' squids: their fits 1.5 and 1.1 % off, apparent pitch 4.4 and 3.7 px,
-have one arm part on bare water and a second absent in the left camera only, and were rejected when
-the worse camera's count decided). Where it does not, the worse camera's count decides: a part is
-then a handful of pixels, and a pixel or two of a leaf's or float's edge moves it between present
-and absent from one camera to the other (harbour held-out 4 empty-water nulls 2032, 2056 and 2092: a
-squid's model fitted at 0.3-0.7 px pitch onto a leaf, one arm part bare and a second absent in one
-camera; the floats under a squid's model, nulls 1567, 1582, 1609, 1663 and 1693, miss both their arm
-parts in both cameras).
+another individual's limb, two absent with a trace of colour a blurred pair of arms, two absent
+with one bare a model wider than what lies under it.
 
 Frames: poses as in `fitness` (R the model's linear map, t mm in the left camera frame, alpha
 px/mm); images: the pair's hue (`StereoHue`), grey (`appearance.StereoGrey`) and a*b* chroma
@@ -59,14 +48,12 @@ from photoservo.vision.fitness import StereoHue, nearest_pixel, project_model
 from photoservo.vision.parts import FOAM, absent_flags, under_foam
 from photoservo.vision.photo_model import HUE_BINS, PhotoModel, target_hue_lut
 from photoservo.vision.rig import Rig
-from photoservo.vision.sampling import sampling_pitch
 
 BARE_Z = 2.0  # standard errors: a part's mean colour position closer to the water's than this is bare water
 MIN_WATER = 8  # a camera judges only with at least this many water points (outer points off target hue)...
 MIN_BODY = 8  # ...and body points (inner points on target hue)...
 MIN_SPAN = 4.0  # ...and a body at least this far from the water in (grey, a*, b*) units
 WATER_STRIDE = 7  # `water_chroma` reads every this-th pixel of the water
-RESOLVED_PX = 1.0  # the image resolves the photo-model's sampling where its apparent pitch is at least a pixel
 
 
 def _colours(uv: np.ndarray, grey: np.ndarray, ab: np.ndarray, hue: np.ndarray
@@ -124,16 +111,10 @@ def bare_flags(R: np.ndarray, t: np.ndarray, alpha: float, model: PhotoModel, fr
 def bare_parts(R: np.ndarray, t: np.ndarray, alpha: float, model: PhotoModel, frame: StereoHue,
                grey_frame: StereoGrey, chroma: StereoChroma, rig: Rig, labels: np.ndarray,
                z: float = BARE_Z, foam_share: float = 1.0) -> tuple[int, int]:
-    """(absent, bare): how many parts are absent and how many lie on bare water in both cameras
-    (`bare_flags`). Absent: in both cameras where the image resolves the model's sampling (its
-    apparent pitch at least `RESOLVED_PX`: a part one camera sees on a target hue is under the
-    model), else in the worse camera (module docstring)."""
+    """(absent, bare): the worse camera's count of absent parts and how many parts lie on bare
+    water in both cameras (`bare_flags`)."""
     absent, bare = bare_flags(R, t, alpha, model, frame, grey_frame, chroma, rig, labels, z, foam_share)
-    if not absent.size:
-        return 0, int(bare.sum())
-    pitch = sampling_pitch(model.inner_uv) * float(rig.left.K[0, 0]) / (float(alpha) * float(np.asarray(t)[2]))
-    n = (absent[0] & absent[1]).sum() if pitch >= RESOLVED_PX else absent.sum(axis=1).max()
-    return int(n), int(bare.sum())
+    return int(absent.sum(axis=1).max()) if absent.size else 0, int(bare.sum())
 
 
 def water_chroma(hue: np.ndarray, ab: np.ndarray, target: np.ndarray) -> np.ndarray:

@@ -52,16 +52,16 @@ weighs ~0, the creature's own ~1. Where the contour rule is on (`frame.chroma`),
 what the weight alone let through: the squid's orange, a hue the fish's photo barely holds, goes
 on past the fish's outline (0.106 weighted, 0.149 here, against 0.11).
 
-A candidate must also have its parts there (`vision/parts.py`): the photo-model's inner points fall
-into compact parts, and at most `max_absent_parts` of the model's parts may land on hue with fewer
-than half their points on a target hue — a crab's model squeezed onto a squid or a buoy of its
-colour matches on its body while its legs lie on water; foam over a creature leaves its parts
-without hue, which does not count against it, nor does a part straddling a foam band's pale, blurred
-edge (`parts.foam_marked`, `[estimator] foam_part_share`). Of two or more parts absent (in both
-cameras where the image resolves the model) none may lie on bare water (`vision/bare_parts.py`,
-`[estimator] bare_water_z`): a float or a leaf of the creature's one hue under its model leaves the
-model's arms on pixels of the water's own colour beside it, where a true creature's blurred arms
-leave a trace of the body's colour and another individual's displaced limb leaves one part.
+A candidate must also have its parts there (`vision/parts.py`): the photo-model's inner points
+fall into compact parts, and at most `max_absent_parts` of the model's parts may land on hue
+with fewer than half their points on a target hue — a crab's model squeezed onto a squid or a
+buoy of its colour matches on its body while its legs lie on water; foam over a creature leaves
+its parts without hue, which does not count against it, nor does a part straddling a foam band's
+pale, blurred edge (`parts.foam_marked`, `[estimator] foam_part_share`). Of two or more absent
+parts none may lie on bare water (`vision/bare_parts.py`, `[estimator] bare_water_z`): a float or
+a leaf of the creature's one hue under its model leaves the model's arms on pixels of the water's
+own colour beside it, where a true creature's blurred arms leave a trace of the body's colour and
+another individual's displaced limb leaves one part.
 
 Where the contour rule bounds the target (`frame.chroma`: the target's hues everywhere), the outline
 is seen only through the outer points it judges: those at least `contour.MIN_GAP_PX` from their inner
@@ -320,8 +320,7 @@ class Detection:
     (`vision/parts.py`: of all its parts, those under foam are not absent; nan when no part lands
     on hue). `bare_parts`: how many of the absent parts lie on bare water in both cameras
     (`vision/bare_parts.py`; 0 when not judged: no grey or chroma images, `bare_water_z` 0), with
-    `absent` the count of parts absent in both cameras where the image resolves the model's sampling,
-    else in the worse camera (`bare_parts.bare_parts`; of two or more, none may be bare).
+    `absent` the worse camera's count of absent parts (of two or more, none may be bare).
     `outline_judged`: where the contour rule bounds the target, the worse camera's share of outer
     points it judges (`contour.judged_share`; nan elsewhere): below `MIN_JUDGED_SHARE` the outline was
     not seen and the candidate does not pass (module docstring). `off_water`: where hue bounds the

@@ -125,8 +125,8 @@ class EstimatorParams:
     max_outer_if_appearance: float  # ...or at most this share when both appearance cues reach min_appearance
     min_appearance: float  # appearance cues (vision/appearance.py) that excuse an outline spill
     max_absent_parts: float  # detection also needs at most this share of the model's parts absent (vision/parts.py)
-    bare_water_z: float  # ...and of two or more parts absent (both cameras where resolved) none on bare water
-    # within this many standard errors of the water's colour around the candidate (vision/bare_parts.py; 0 = off)
+    bare_water_z: float  # ...and of two or more absent parts none on bare water within this many standard
+    # errors of the water's colour around the candidate (vision/bare_parts.py; 0 = off)
     foam_part_share: float  # ...both judging no part with this share of its points on foam where this share of the
     # model's lies on foam in both cameras (vision/parts.py: a part straddling a foam band's edge; 1 = off)
     outline_distinctive: bool  # an outer point on a target hue spills by how much more the creature holds of that
