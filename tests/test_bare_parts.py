@@ -104,6 +104,17 @@ def test_a_float_under_a_squid_model_is_not_found_for_its_arms_on_bare_water():
     assert first["contrast"] >= P.min_contrast and first["outer_on_target"] <= P.max_outer_on_target
 
 
+@pytest.mark.parametrize("seed, distractor", [(2209, "float"), (2221, "species")])
+def test_a_part_one_camera_sees_does_not_excuse_a_look_alike(seed, distractor):
+    # harbour held-out 5 nulls (benchmarks/accuracy.py --generator harbour --first-null 700): a float
+    # and another species under a squid's model, 2 of 12 parts absent, one of them in one camera
+    # only. Counting only the parts both cameras miss (Dec 1, reverted) found them both
+    sc, model = _harbour(seed, kind="squid", empty=True, distractor=True)
+    assert [d["kind"] for d in sc.truth["distractors"]] == [distractor]
+    est = estimate(model, sc.left, sc.right, sc.rig, CFG.ga, P, CFG.fitness, seed=seed - 1500)
+    assert not est.found
+
+
 def test_a_squid_whose_thin_arms_blur_into_the_water_keeps_them():
     # harbour 1018 (same photo, split by foam): two arm parts absent, their pixels half way from the
     # water's colour to the body's; found as before
