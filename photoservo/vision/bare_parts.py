@@ -82,11 +82,11 @@ def bare_flags(R: np.ndarray, t: np.ndarray, alpha: float, model: PhotoModel, fr
     bare = np.zeros((2, n), bool)
     views = ((p.inner_left[0], p.outer_left[0], frame.left, grey_frame.left, chroma.left),
              (p.inner_right[0], p.outer_right[0], frame.right, grey_frame.right, chroma.right))
-    foam = np.stack([_colours(v[0], v[3], v[4], v[2])[1] == FOAM for v in views])  # both cameras' (parts.under_foam)
+    inner = [_colours(uv_in, grey, ab, hue) for uv_in, _, hue, grey, ab in views]
+    foam = np.stack([h_in == FOAM for _, h_in, _, _ in inner])  # both cameras' (parts.under_foam)
     if not under_foam(foam, foam_share):
         foam_share = 1.0
-    for k, (uv_in, uv_out, hue, grey, ab) in enumerate(views):
-        c_in, h_in, _, pix = _colours(uv_in, grey, ab, hue)
+    for k, ((_, uv_out, hue, grey, ab), (c_in, h_in, _, pix)) in enumerate(zip(views, inner)):
         c_out, h_out, _, _ = _colours(uv_out, grey, ab, hue)
         hued = h_in < HUE_BINS
         on = target[h_in]

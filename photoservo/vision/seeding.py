@@ -295,8 +295,9 @@ def bridged_pairs(left: list[Blob], right: list[Blob], pairs: list[BlobPair], fo
     out = ((match_blobs(uneven_l, whole_r, rig, params) if uneven_l and whole_r else [])
            + (match_blobs(whole_l, uneven_r, rig, params) if whole_l and uneven_r else []))
     kept: list[BlobPair] = []
+    known = pairs + group_pairs(pairs, params)
     for bp in out:
-        if not any(same(bp.left, h.left) and same(bp.right, h.right) for h in pairs + group_pairs(pairs, params) + kept):
+        if not any(same(bp.left, h.left) and same(bp.right, h.right) for h in known + kept):
             kept.append(bp)
     return sorted(kept, key=lambda bp: -bp.left.area)
 
