@@ -131,3 +131,22 @@ def test_a_squid_whose_thin_arms_blur_into_the_water_keeps_them():
     # the absent parts land off the target's hues in at least one camera: the check judged them
     h = inner_hues(c.R_model, c.position_mm, c.alpha, model, frame, sc.rig)
     assert (h < HUE_BINS).mean() > 0.5
+
+
+def test_another_individuals_squid_with_the_photos_layout_keeps_an_arm_on_bare_water():
+    # harbour 1453 (benchmarks/accuracy.py --generator harbour --first-scene 400): another individual's
+    # squid whose tentacle lies elsewhere than the photo's. Its fit 1.1 % off has that arm's part on bare
+    # water and a second arm part absent: the bare-water rule's pattern, as a float's. Inside, the
+    # brightness layout is the photo's by both appearance cues (a float of one hue has none to show):
+    # found. With the layout not counted (min_appearance above every cue) the rule rejects it
+    sc, model = _harbour(1453, kind="squid", other_photo=True)
+    est = estimate(model, sc.left, sc.right, sc.rig, CFG.ga, P, CFG.fitness, seed=453)
+    assert est.found
+    truth = np.array(sc.truth["position_mm"])
+    assert np.linalg.norm(np.array(est.position_mm) - truth) / truth[2] < 0.05
+    first = est.candidates[0]
+    assert first["absent_parts"] == pytest.approx(2 / 12, abs=1e-3) and first["bare_parts"] >= 1
+    assert min(first["appearance"], first["body_layout"]) >= P.min_appearance
+    blind = estimate(model, sc.left, sc.right, sc.rig, CFG.ga, dataclasses.replace(P, min_appearance=1.01),
+                     CFG.fitness, seed=453)
+    assert not blind.found
