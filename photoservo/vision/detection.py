@@ -61,14 +61,15 @@ pale, blurred edge (`parts.foam_marked`, `[estimator] foam_part_share`). Of two 
 parts none may lie on bare water (`vision/bare_parts.py`, `[estimator] bare_water_z`): a float or
 a leaf of the creature's one hue under its model leaves the model's arms on pixels of the water's
 own colour beside it, where a true creature's blurred arms leave a trace of the body's colour and
-another individual's displaced limb leaves one part. Another individual's limbs may leave two (its
-tentacle shorter or lying elsewhere than the photo's, a second arm part absent beside it): a
-candidate whose brightness layout inside is the photo's by both appearance cues (each at least
-`min_appearance`, as for the outline's excuse) is not rejected for parts on bare water. A float or
-a leaf of one hue has no layout of the photo's to show (harbour nulls 1567, 1582, 1609, 1663, 1693,
-2032, 2056, 2092, 2209, 2221: the smaller cue -0.17 to 0.17 at their fits with a bare part); the
-other individuals' squids harbour 1441 and 1453 show theirs (0.29 / 0.34 and 0.40 / 0.45 at fits
-1.6 and 1.1 % off).
+another individual's displaced limb leaves one part. Another individual's limb may leave one part
+on bare water and a second absent beside it (its tentacle shorter or lying elsewhere than the
+photo's): a candidate with ONE part on bare water whose brightness layout inside is the photo's by
+both appearance cues (each at least `min_appearance`, as for the outline's excuse) is not rejected.
+A float or a leaf of one hue has no layout of the photo's to show (harbour nulls 1567, 1582, 1609,
+1663, 1693, 2032, 2056, 2092, 2209, 2221: one part bare, the smaller cue -0.17 to 0.17); the other
+individuals' squids harbour 1441 and 1453 show theirs (0.29 / 0.34 and 0.40 / 0.45 at fits 1.6 and
+1.1 % off). Two parts on bare water are a model wider than what lies under it whatever its layout
+(harbour null 2275: another species under a squid's model, both arm parts bare, cues 0.29 / 0.54).
 
 Where the contour rule bounds the target (`frame.chroma`: the target's hues everywhere), the outline
 is seen only through the outer points it judges: those at least `contour.MIN_GAP_PX` from their inner
@@ -311,7 +312,8 @@ class Detection:
     where the background holds the target's hues in patches) — the creature's outline must end
     where the model's does (a buoy or another species of the same colour usually spills over).
     passed = contrast >= min_contrast and (outer_on_target <= max_outer_on_target or excused)
-             and not absent_parts > max_absent_parts and not (absent >= 2 and bare_parts >= 1 and not layout)
+             and not absent_parts > max_absent_parts
+             and not (absent >= 2 and bare_parts >= 1 and not (bare_parts == 1 and layout))
              and not outline_judged < MIN_JUDGED_SHARE and not off_water > MAX_OFF_WATER,
     excused = outer_on_target <= max_outer_if_appearance and layout and not blob_beyond > MAX_BLOB_BEYOND,
     layout = appearance, body_layout >= min_appearance
@@ -336,9 +338,9 @@ class Detection:
     the outline passes by the appearance excuse alone, the smaller camera's share of the footprint by
     which the blob of target hue under the candidate goes on past its outline (`footprint.blob_beyond`;
     nan where not measured), at most `MAX_BLOB_BEYOND` for the excuse to hold. `on_bare_water`: the
-    bare-water rule rejects it (two or more parts absent, one of them on bare water, and the layout
-    inside not the photo's: a float or another creature under the model, not the creature with a part
-    hidden or another individual's limb lying elsewhere; `candidates.ranked`)."""
+    bare-water rule rejects it (two or more parts absent, one of them on bare water and the layout
+    inside not the photo's, or two on bare water: a float or another creature under the model, not the
+    creature with a part hidden or another individual's limb lying elsewhere; `candidates.ranked`)."""
 
     score: float
     null_level: float
@@ -430,7 +432,7 @@ def detect(c: Candidate, model: PhotoModel, frame: StereoHue, rig: Rig, fit_para
     elsewhere = (float(off_water(c.R_model, c.position_mm, c.alpha, model, frame, chroma, rig,
                                  fit_params.contour_chroma, water).min()) if frame.chroma is None and chroma is not None
                  else math.nan)
-    on_bare_water = n_absent >= 2 and bare >= 1 and not layout
+    on_bare_water = n_absent >= 2 and bare >= 1 and not (bare == 1 and layout)
     passed = (contrast >= p.min_contrast and (outer <= p.max_outer_on_target or excused)
               and not absent > p.max_absent_parts  # nan (no part on hue): not a reason to reject
               and not on_bare_water
