@@ -22,7 +22,12 @@ apparent size but take any depth of the search volume (a search meets the model 
 at the candidate's own depth alone, a small fit on a spot of the colour far behind the creature
 finds nothing else red and looked better than the creature, whose depth holds more of its
 colour). A model shrunk to a few pixels fits thousands of places and some small spot of its
-colour somewhere; the creature's own scale fits a few dozen.
+colour somewhere; the creature's own scale fits a few dozen. A candidate standing at or below 0
+does not pass: what a search of the pair at its scale finds where it is not scores as well, so it
+cannot be told from a look-alike of its shape (the aloe pair's upright leaf at 0.6x: fits a third of
+its size on a neighbouring leaf's tip, 0.53-0.56 where the null's draws on the plant reach 0.55,
+standing -0.06 to -0.03 in 3 of the 5 seeds that found it there; the answers of the synthetic sets'
+targets stand 0.25 or more, the motorcycle's and the aloe pot's 0.49 or more).
 
 The outline test alone rejects true creatures whose outline differs from the photo's (another
 individual's fins and proportions, a rim the photo cuts off, a real target cut off by what lies
@@ -314,7 +319,8 @@ class Detection:
     passed = contrast >= min_contrast and (outer_on_target <= max_outer_on_target or excused)
              and not absent_parts > max_absent_parts
              and not (absent >= 2 and bare_parts >= 1 and not (bare_parts == 1 and layout))
-             and not outline_judged < MIN_JUDGED_SHARE and not off_water > MAX_OFF_WATER,
+             and not outline_judged < MIN_JUDGED_SHARE and not off_water > MAX_OFF_WATER
+             and standing > 0,
     excused = outer_on_target <= max_outer_if_appearance and layout and not blob_beyond > MAX_BLOB_BEYOND,
     layout = appearance, body_layout >= min_appearance
     (`appearance_pair`; module docstring);
@@ -434,6 +440,7 @@ def detect(c: Candidate, model: PhotoModel, frame: StereoHue, rig: Rig, fit_para
                  else math.nan)
     on_bare_water = n_absent >= 2 and bare >= 1 and not (bare == 1 and layout)
     passed = (contrast >= p.min_contrast and (outer <= p.max_outer_on_target or excused)
+              and standing > 0.0  # a search of the pair at this scale finds as good elsewhere (module docstring)
               and not absent > p.max_absent_parts  # nan (no part on hue): not a reason to reject
               and not on_bare_water
               and not judged < MIN_JUDGED_SHARE  # nan (the hue regime): not judged
