@@ -436,3 +436,21 @@ def test_a_fit_too_near_on_the_crate_is_slid_onto_it_not_ranked_last(monkeypatch
     monkeypatch.setattr(candidates, "onto_surface", within_tol)
     (right14, _, size14), (right24, depth24, _) = answers()
     assert size14 > 0.2 and not (right24 and depth24 < 0.05), (size14, right24, depth24)
+
+
+def test_a_fit_standing_no_higher_than_the_best_elsewhere_does_not_pass():
+    """The fender at 0.6x, seed 0, full size: found at its place; the candidates behind it include a
+    fit 78 % small on another object that passed detection standing -0.01 (what a search of the pair
+    at its scale finds elsewhere scores as well: vision/detection.py). No candidate standing at or
+    below 0 passes, and the answer stands far above (0.88)."""
+    from photoservo.vision.estimator import estimate
+
+    c, = real_cases(CFG.photo_model, targets=("fender",), variants=("scaled",))
+    est = estimate(c.model, c.left, c.right, c.rig, CFG.ga, CFG.estimator, CFG.fitness, seed=0)
+    assert est.found
+    x, y, w, h = c.truth["box_px"]
+    uv = project_points(est.position_mm, c.rig.left)
+    assert x <= uv[0] <= x + w and y <= uv[1] <= y + h
+    assert est.candidates[0]["standing"] > 0.5
+    low = [k for k in est.candidates if k["standing"] <= 0]
+    assert low and not any(k["found"] for k in low)
