@@ -20,6 +20,7 @@ import numpy as np
 
 from photoservo.vision.appearance import StereoGrey, appearance
 from photoservo.vision.contour import StereoChroma
+from photoservo.vision.colour_cells import StereoCells
 from photoservo.vision.detection import MAX_BLOB_BEYOND, MAX_OFF_WATER, MIN_JUDGED_SHARE, Detection, detect
 from photoservo.vision.fitness import StereoHue, fitness, point_weight
 from photoservo.vision.parts import absent_parts
@@ -360,8 +361,8 @@ TURNED_WINDOWS = ((0.03, 0.08), (0.06, 0.15), (0.06, 0.15))
 def appearance_twin(first: tuple[Detection, Candidate], search: PoseSearch, grey_frame: StereoGrey,
                     p: EstimatorParams, seed: int = 0, value_frame: StereoGrey | None = None,
                     parts: np.ndarray | None = None, chroma: StereoChroma | None = None,
-                    weight: np.ndarray | None = None, foam: StereoHue | None = None
-                    ) -> Generator[int, None, tuple[Detection, Candidate]]:
+                    weight: np.ndarray | None = None, foam: StereoHue | None = None,
+                    cells: StereoCells | None = None) -> Generator[int, None, tuple[Detection, Candidate]]:
     """The chosen candidate or its head-to-tail twin at the same place (`PoseSearch.turned_steps`:
     turned about the photo mask's centroid, refined by a short GA in each of TURNED_WINDOWS in
     turn), decided by the appearance cue (`vision/appearance.py`): the hue fitness scores a
@@ -393,7 +394,7 @@ def appearance_twin(first: tuple[Detection, Candidate], search: PoseSearch, grey
         return first
     twin = yield from aspect_refined(search, twin, p)
     d_t = detect(twin, model, frame, rig, search.fit_params, p, seed=seed, grey_frame=grey_frame,
-                 value_frame=value_frame, parts=parts, chroma=chroma, weight=weight, foam=foam)
+                 value_frame=value_frame, parts=parts, chroma=chroma, weight=weight, foam=foam, cells=cells)
     if d.passed and not d_t.passed:
         return first
     return d_t, twin

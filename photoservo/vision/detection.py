@@ -117,6 +117,7 @@ import numpy as np
 from photoservo.geometry import rotation_from_heading_tilt
 from photoservo.vision.appearance import StereoGrey, appearance, body_layout, body_points
 from photoservo.vision.bare_parts import bare_parts, off_water
+from photoservo.vision.colour_cells import StereoCells, cell_share
 from photoservo.vision.contour import (
     TARGET_FLAT,
     StereoChroma,
@@ -175,6 +176,12 @@ MAX_OFF_WATER = 0.25
 # a squid's mantle) 1.27; at the truth pose of the target scenes of tuned and held-out 1, 2, 4 (both
 # generators) <= 0.13 but renderer 1431 (a look-alike touching the fish) 0.43
 MAX_BLOB_BEYOND = 0.5
+# where the contour rule bounds the target: placements of the model elsewhere (its depth and scale, any heading)
+# at which the photo's colours are counted (`photo_colours`), their random stream (apart from the nulls' own)
+# and the quantile of their shares the candidate's must reach (the outline check's reference quantile)
+COLOUR_PLACEMENTS = 200
+COLOUR_STREAM = 7
+COLOUR_NULL_QUANTILE = OUTLINE_NULL_QUANTILE
 
 
 def confidence(contrast: float, params: EstimatorParams) -> float:
@@ -221,13 +228,42 @@ def null_scores(c: Candidate, model: PhotoModel, frame: StereoHue, rig: Rig, fit
     uv = np.repeat(uv, jitters, axis=0) + rng.uniform(-0.2, 0.2, (n, 2)) * length
     zs = np.repeat(zs, jitters)
     psi = np.repeat(rng.uniform(-math.pi, math.pi, len(uv) // jitters), jitters) + rng.uniform(-0.35, 0.35, n)
-    R = np.asarray(c.R)[None] @ rotation_from_heading_tilt(psi, np.zeros(n), np.zeros(n))
-    R = aspect_map(R, np.full(n, c.aspect))
-    pos = np.column_stack([(uv[:, 0] - K[0, 2]) * zs / K[0, 0], (uv[:, 1] - K[1, 2]) * zs / K[1, 1], zs])
+    R, pos = _placed(c, uv, zs, psi, K)
     alpha = c.alpha * z / zs * rng.uniform(0.9, 1.1, n)
     f = fitness(R, pos, alpha, model, frame, rig, strict)
     shares = outer_share(R, pos, alpha, model, frame, rig, fit_params, cues) if outer else np.zeros(0)
     return f.reshape(-1, jitters).max(axis=1), shares
+
+
+def _placed(c: Candidate, uv: np.ndarray, zs: np.ndarray, psi: np.ndarray, K: np.ndarray
+            ) -> tuple[np.ndarray, np.ndarray]:
+    """The candidate's model turned by `psi` (rad, about its normal) with its origin at left-image
+    pixels `uv` (N, 2) and depths `zs` (N,) mm: (R (N, 3, 3) with the candidate's aspect, position (N, 3) mm)."""
+    n = len(uv)
+    R = np.asarray(c.R)[None] @ rotation_from_heading_tilt(psi, np.zeros(n), np.zeros(n))
+    R = aspect_map(R, np.full(n, c.aspect))
+    pos = np.column_stack([(uv[:, 0] - K[0, 2]) * zs / K[0, 0], (uv[:, 1] - K[1, 2]) * zs / K[1, 1], zs])
+    return R, pos
+
+
+def photo_colours(c: Candidate, model: PhotoModel, cells: StereoCells, rig: Rig, seed: int = 0
+                  ) -> tuple[float, float]:
+    """The candidate's share of inner points on the photo's colours (`colour_cells.cell_share`, the worse
+    camera) and the `COLOUR_NULL_QUANTILE` quantile of that share at `COLOUR_PLACEMENTS` placements of its
+    model elsewhere in the pair (its depth and scale, any heading, off its footprint: `_null_origins`;
+    stream `COLOUR_STREAM` of `seed`); nan, nan where no placement fits."""
+    rng = np.random.default_rng([seed, COLOUR_STREAM])
+    K = rig.left.K
+    t = np.asarray(c.position_mm, float)
+    length = K[0, 0] * max(model.size_px) / (c.alpha * float(t[2]))
+    uv, zs = _null_origins(t, length, rig, rng, 8 * COLOUR_PLACEMENTS, None)
+    uv, zs = uv[:COLOUR_PLACEMENTS], zs[:COLOUR_PLACEMENTS]
+    if not len(uv):
+        return math.nan, math.nan
+    R, pos = _placed(c, uv, zs, rng.uniform(-math.pi, math.pi, len(uv)), K)
+    null = cell_share(R, pos, np.full(len(uv), c.alpha), model.inner_uv, cells, rig)
+    own = cell_share(c.R_model, c.position_mm, c.alpha, model.inner_uv, cells, rig)
+    return float(own[0]), float(np.quantile(null, COLOUR_NULL_QUANTILE))
 
 
 def _null_origins(t: np.ndarray, length: float, rig: Rig, rng: np.random.Generator, draws: int,
@@ -320,7 +356,7 @@ class Detection:
              and not absent_parts > max_absent_parts
              and not (absent >= 2 and bare_parts >= 1 and not (bare_parts == 1 and layout))
              and not outline_judged < MIN_JUDGED_SHARE and not off_water > MAX_OFF_WATER
-             and standing > 0,
+             and standing > 0 and not photo_colours < photo_colours_null,
     excused = outer_on_target <= max_outer_if_appearance and layout and not blob_beyond > MAX_BLOB_BEYOND,
     layout = appearance, body_layout >= min_appearance
     (`appearance_pair`; module docstring);
@@ -346,7 +382,10 @@ class Detection:
     nan where not measured), at most `MAX_BLOB_BEYOND` for the excuse to hold. `on_bare_water`: the
     bare-water rule rejects it (two or more parts absent, one of them on bare water and the layout
     inside not the photo's, or two on bare water: a float or another creature under the model, not the
-    creature with a part hidden or another individual's limb lying elsewhere; `candidates.ranked`)."""
+    creature with a part hidden or another individual's limb lying elsewhere; `candidates.ranked`).
+    `photo_colours`: where the contour rule bounds the target and the pair's colour cells are given, the
+    candidate's share of inner points on the photo's colours (`photo_colours`), `photo_colours_null` the
+    same share's `COLOUR_NULL_QUANTILE` quantile at placements elsewhere (nan both where not judged)."""
 
     score: float
     null_level: float
@@ -364,6 +403,8 @@ class Detection:
     off_water: float = math.nan
     blob_beyond: float = math.nan
     on_bare_water: bool = False
+    photo_colours: float = math.nan
+    photo_colours_null: float = math.nan
 
 
 def appearance_pair(c: Candidate, model: PhotoModel, frame: StereoHue, grey_frame: StereoGrey,
@@ -381,7 +422,8 @@ def detect(c: Candidate, model: PhotoModel, frame: StereoHue, rig: Rig, fit_para
            p: EstimatorParams, seed: int = 0, grey_frame: StereoGrey | None = None,
            value_frame: StereoGrey | None = None, parts: np.ndarray | None = None,
            chroma: StereoChroma | None = None, weight: np.ndarray | None = None,
-           water: np.ndarray | None = None, foam: StereoHue | None = None) -> Detection:
+           water: np.ndarray | None = None, foam: StereoHue | None = None,
+           cells: StereoCells | None = None) -> Detection:
     """The detection test of one candidate (see `Detection`); `seed` draws the null placements;
     `grey_frame` / `value_frame` (`appearance.stereo_grey` / `stereo_value` of the pair): the
     appearance cues that may excuse an outline spill (module docstring; without them, none);
@@ -392,7 +434,9 @@ def detect(c: Candidate, model: PhotoModel, frame: StereoHue, rig: Rig, fit_para
     (`bare_parts.stereo_water`; computed when None), for the outline on another object; `foam`: the
     pair's hue with its foam marked (`parts.foam_marked`), which the parts check and the bare-water
     rule read instead of `frame`: a part with `foam_part_share` of its points on foam is not judged
-    (module docstring)."""
+    (module docstring); `cells`: the pair's pixels on the photo's colours (`colour_cells.stereo_cells`),
+    which, where the contour rule bounds the target, the candidate's inner points must lie on as often as
+    the model's placements elsewhere do at their upper quantile (`photo_colours`; module docstring)."""
     strict = dataclasses.replace(fit_params, combine="min")
     score = float(fitness(c.R_model, c.position_mm, c.alpha, model, frame, rig, strict)[0])
     rng = np.random.default_rng(seed)
@@ -439,15 +483,20 @@ def detect(c: Candidate, model: PhotoModel, frame: StereoHue, rig: Rig, fit_para
                                  fit_params.contour_chroma, water).min()) if frame.chroma is None and chroma is not None
                  else math.nan)
     on_bare_water = n_absent >= 2 and bare >= 1 and not (bare == 1 and layout)
+    # where the contour rule bounds the target: the inner points on the photo's colours (module docstring)
+    colours, colours_null = (photo_colours(c, model, cells, rig, seed) if cells is not None and frame.chroma is not None
+                             else (math.nan, math.nan))
     passed = (contrast >= p.min_contrast and (outer <= p.max_outer_on_target or excused)
               and standing > 0.0  # a search of the pair at this scale finds as good elsewhere (module docstring)
               and not absent > p.max_absent_parts  # nan (no part on hue): not a reason to reject
               and not on_bare_water
               and not judged < MIN_JUDGED_SHARE  # nan (the hue regime): not judged
-              and not elsewhere > MAX_OFF_WATER)  # nan (the contour regime, no chroma): not judged
+              and not elsewhere > MAX_OFF_WATER  # nan (the contour regime, no chroma): not judged
+              and not colours < colours_null)  # nan (the hue regime, no cells): not judged
     outline = 1.0 if excused else 1.0 / (1.0 + math.exp(-(p.max_outer_on_target - outer) / 0.02))
     return Detection(score=score, null_level=q, contrast=contrast, outer_on_target=outer, passed=bool(passed),
                      confidence=confidence(contrast, p) * outline, threshold=q + p.min_contrast * (1.0 - q),
                      standing=standing, appearance=look[0], body_layout=look[1], absent_parts=absent,
                      bare_parts=bare, outline_judged=judged,
-                     off_water=elsewhere, blob_beyond=beyond, on_bare_water=bool(on_bare_water))
+                     off_water=elsewhere, blob_beyond=beyond, on_bare_water=bool(on_bare_water),
+                     photo_colours=colours, photo_colours_null=colours_null)

@@ -55,6 +55,7 @@ from photoservo.vision.candidates import (appearance_twin, grown_outlines, parte
                                           same_surface_first, scaled_plane, stereo_depth, stereo_islands, stereo_tilt,
                                           turned_islands)
 from photoservo.vision.contour import stereo_chroma
+from photoservo.vision.colour_cells import stereo_cells
 from photoservo.vision.detection import Detection, detect
 from photoservo.vision.fitness import FitnessParams, StereoHue, stereo_hue
 from photoservo.vision.ga import GAParams
@@ -372,6 +373,9 @@ def acquisition(model: PhotoModel, left_bgr: np.ndarray, right_bgr: np.ndarray, 
                  foam=foam if p.foam_part_share < 1.0 else None)
     # the water's colour in each image, for detection's outline on another object (where hue bounds the target)
     looks["water"] = stereo_water(model, frame, looks["chroma"]) if frame.chroma is None else None
+    # ...and the pair's pixels on the photo's colours, for its inner points where the contour rule bounds the target
+    looks["cells"] = (stereo_cells(left_bgr, right_bgr, model.colour_cells, fit_params.min_value)
+                      if frame.chroma is not None and model.colour_cells.any() else None)
     if provisional is not None and len(islands) == 1 and np.isfinite(firsts[0].fitness):
         provisional.append((detect(firsts[0], model, frame, rig, fit_params, p, seed=seed, **looks),
                             dataclasses.replace(firsts[0], source=islands[0][0])))
@@ -400,7 +404,8 @@ def acquisition(model: PhotoModel, left_bgr: np.ndarray, right_bgr: np.ndarray, 
     if p.twin_appearance and results:
         search = dict(islands)[results[0][1].source]
         results[0] = yield from appearance_twin(results[0], search, looks["grey_frame"], p, seed, looks["value_frame"],
-                                                looks["parts"], looks["chroma"], looks["weight"], looks["foam"])
+                                                looks["parts"], looks["chroma"], looks["weight"], looks["foam"],
+                                                looks["cells"])
     if p.outline_grow > 1.0 and results and not results[0][0].passed:  # after the twin: it draws from the islands' rng
         results = yield from grown_outlines(results, dict(islands), looks, p, seed)
     if p.parted_turns and results and not results[0][0].passed:  # after the grown outlines (own streams)

@@ -52,6 +52,8 @@ class PhotoModel:
     inner_value: (N_in,) float32 the photo's grey level at each inner point (the appearance cue,
         `vision/appearance.py`); empty for a model built without a photo (the cue is then off).
     inner_brightness: (N_in,) float32 the photo's brightness max(B, G, R) there (`appearance.body_layout`).
+    colour_cells: (15, 8) bool the photo's colours over hue and saturation (`colour_cells.photo_cells`);
+        empty for a model built without a photo (detection's cue on them is then off).
     """
 
     inner_uv: np.ndarray
@@ -63,6 +65,7 @@ class PhotoModel:
     mask: np.ndarray
     inner_value: np.ndarray = field(default_factory=lambda: np.zeros(0, np.float32))
     inner_brightness: np.ndarray = field(default_factory=lambda: np.zeros(0, np.float32))
+    colour_cells: np.ndarray = field(default_factory=lambda: np.zeros((0, 0), bool))
 
     @cached_property
     def outer_neighbour(self) -> np.ndarray:
@@ -317,10 +320,13 @@ def build_photo_model(photo_bgr: np.ndarray, params: PhotoModelParams,
     `params.max_points` points the pitch is coarsened until they fit. `target_hues` marks the
     hues of the inner points and of every hue holding >= 1 % of the target's hued pixels,
     widened by `params.hue_tolerance`. `inner_value` holds the photo's grey at each inner point
-    (`sampling.photo_values`), `inner_brightness` its brightness.
+    (`sampling.photo_values`), `inner_brightness` its brightness, `colour_cells` the photo's colours
+    over hue and saturation (`colour_cells.photo_cells`).
 
     Raises InputError when the photo is not a colour image, no target separates, or the target
     carries no hue (all grey/white/dark)."""
+    from photoservo.vision.colour_cells import photo_cells  # it reads the fitness, which reads this module
+
     mask = target_mask(photo_bgr, params, roi)
     hue = hue_image(photo_bgr, params.min_saturation, params.min_value)
     x, y, w, h = cv2.boundingRect(mask)
@@ -347,7 +353,8 @@ def build_photo_model(photo_bgr: np.ndarray, params: PhotoModelParams,
     return PhotoModel(inner_uv=pin - o, inner_hue=hin.astype(np.uint8), outer_uv=pout - o,
                       target_hues=lut, size_px=(float(w), float(h)), origin_px=origin, mask=mask,
                       inner_value=photo_values(photo_bgr, pin, interval),
-                      inner_brightness=photo_values(photo_bgr, pin, interval, brightness))
+                      inner_brightness=photo_values(photo_bgr, pin, interval, brightness),
+                      colour_cells=photo_cells(photo_bgr, mask, params.min_value))
 
 
 def load_photo_model(path: str, params: PhotoModelParams,
