@@ -29,6 +29,14 @@ its size on a neighbouring leaf's tip, 0.53-0.56 where the null's draws on the p
 standing -0.06 to -0.03 in 3 of the 5 seeds that found it there; the answers of the synthetic sets'
 targets stand 0.25 or more, the motorcycle's and the aloe pot's 0.49 or more).
 
+Where the contour rule bounds the target (`frame.chroma`: its hues everywhere, a plant before a
+patterned backdrop) hue cannot tell the target from any stuff of its colour, and a pale target
+barely carries hue. There a candidate's inner points must lie on the photo's colours over hue and
+saturation (`vision/colour_cells.py`, down to saturation 12) at least as often as the same model's
+placements elsewhere at their 0.9 quantile (`photo_colours`; the pair compared with itself). The aloe
+pair's neighbouring-leaf fits 0.40-0.45 against 0.64-0.69; every answer on the right object of both
+real pairs 0.86-0.98 against <= 0.69.
+
 The outline test alone rejects true creatures whose outline differs from the photo's (another
 individual's fins and proportions, a rim the photo cuts off, a real target cut off by what lies
 in front of it). A candidate whose outer points spill (up to `max_outer_if_appearance`) still
