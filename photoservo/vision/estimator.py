@@ -28,7 +28,8 @@ still fails after its head-to-tail twin was tried, each candidate that fails its
 alone is tried grown (`candidates.grown_outlines`: a fit shrunk inside the creature spills onto
 the creature itself), then each that fails its parts alone is re-fitted at quarter turns
 (`candidates.parted_turns`: a fit at the creature's place with its heading off has the model's
-legs beside the creature's). Where hue bounds the target, a first candidate that passes is searched again on
+legs beside the creature's), then each whose outline spills, whatever its parts say, is re-fitted at
+quarter turns grown (`candidates.grown_turns`: a fit shrunk inside the creature and turned on it). Where hue bounds the target, a first candidate that passes is searched again on
 the plane both images see under it where its tilt contradicts that plane (`candidates.stereo_tilt`), and at
 the depth both images see under it (`candidates.stereo_depth`).
 
@@ -51,7 +52,7 @@ import numpy as np
 from photoservo.errors import InputError
 from photoservo.vision.appearance import stereo_grey, stereo_value
 from photoservo.vision.bare_parts import stereo_water
-from photoservo.vision.candidates import (appearance_twin, grown_outlines, parted_turns, ranked, refined,
+from photoservo.vision.candidates import (appearance_twin, grown_outlines, grown_turns, parted_turns, ranked, refined,
                                           same_surface_first, scaled_plane, stereo_depth, stereo_islands, stereo_tilt,
                                           turned_islands)
 from photoservo.vision.contour import stereo_chroma
@@ -135,6 +136,7 @@ class EstimatorParams:
     outline_grow: float  # when the first candidate fails, one failing its outline alone is tried grown by sqrt(this)
     # and this (`grown_outlines`; 1 = off)
     parted_turns: bool  # ...and one failing its parts alone re-fitted at quarter turns (`candidates.parted_turns`)
+    grown_turns: bool  # ...and one whose outline spills re-fitted at quarter turns, grown (`candidates.grown_turns`)
     foam_bridge: bool  # seed islands also from pieces joined across foam, some paired alone (`seeding.bridged_pairs`)
     passed_standing_ratio: float  # a candidate that passes ranks first when it stands >= this x the top, which fails
     twin_appearance: bool  # let the appearance cue choose between the first candidate and its head-to-tail twin
@@ -412,6 +414,8 @@ def acquisition(model: PhotoModel, left_bgr: np.ndarray, right_bgr: np.ndarray, 
         results = yield from grown_outlines(results, dict(islands), looks, p, seed)
     if p.parted_turns and results and not results[0][0].passed:  # after the grown outlines (own streams)
         results = yield from parted_turns(results, dict(islands), looks, p, seed)
+    if p.grown_turns and results and not results[0][0].passed:  # after the parted turns (own streams)
+        results = yield from grown_turns(results, dict(islands), looks, p, seed)
     if frame.chroma is None and results:  # where hue bounds the target: the answer on the plane and at the depth
         search = dict(islands)[results[0][1].source]  # both images see
         results[0] = yield from stereo_tilt(results[0], search, left_bgr, right_bgr, looks, p, seed)
