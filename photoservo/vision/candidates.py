@@ -21,7 +21,7 @@ import numpy as np
 from photoservo.vision.appearance import StereoGrey, appearance
 from photoservo.vision.contour import StereoChroma
 from photoservo.vision.colour_cells import StereoCells
-from photoservo.vision.detection import MAX_BLOB_BEYOND, MAX_OFF_WATER, MIN_JUDGED_SHARE, Detection, detect
+from photoservo.vision.detection import Detection, detect
 from photoservo.vision.fitness import StereoHue, fitness, point_weight
 from photoservo.vision.parts import absent_parts
 from photoservo.vision.photo_model import PhotoModel
@@ -443,8 +443,8 @@ PARTED_HEADING_DEG = 45.0
 
 def parted_turns(results: list[tuple[Detection, Candidate]], searches: dict[str, PoseSearch], looks: dict,
                  p: EstimatorParams, seed: int = 0) -> Generator[int, None, list[tuple[Detection, Candidate]]]:
-    """The candidates, re-ranked after each one that fails its parts alone (its contrast and its
-    outline pass, the outline judged and not on another object: vision/detection.py; more than
+    """The candidates, re-ranked after each one that fails its parts alone (`Detection.fails_on_parts`:
+    its contrast and its outline pass, the outline judged and not on another object; more than
     `max_absent_parts` of its parts absent, or two absent and one on bare water) was re-fitted
     turned: at each of PARTED_QUARTERS quarter turns about the photo mask's centroid
     (`twins.turned_about_centroid`), by a short GA (PARTED_HEADING_DEG); the fittest of
@@ -457,12 +457,8 @@ def parted_turns(results: list[tuple[Detection, Candidate]], searches: dict[str,
     per step."""
     out = list(results)
     for k, (d, c) in enumerate(results):
-        excused = (d.outer_on_target <= p.max_outer_if_appearance
-                   and bool(np.all(np.asarray([d.appearance, d.body_layout]) >= p.min_appearance))
-                   and not d.blob_beyond > MAX_BLOB_BEYOND)  # nan: not measured, not a reason
-        if (d.passed or d.contrast < p.min_contrast or not (d.outer_on_target <= p.max_outer_on_target or excused)
-                or d.outline_judged < MIN_JUDGED_SHARE or d.off_water > MAX_OFF_WATER or not np.isfinite(c.fitness)):
-            continue  # passes, or fails on more than its parts (nan outline cues: not measured, not a reason)
+        if not d.fails_on_parts or not np.isfinite(c.fitness):
+            continue  # passes, or fails on more than its parts
         search, best = searches[c.source], c
         for quarters, rng in zip(PARTED_QUARTERS, search.ga.rng.spawn(len(PARTED_QUARTERS))):
             R, t = ((c.R, c.position_mm) if quarters == 0

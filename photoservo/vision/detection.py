@@ -393,7 +393,10 @@ class Detection:
     creature with a part hidden or another individual's limb lying elsewhere; `candidates.ranked`).
     `photo_colours`: where the contour rule bounds the target and the pair's colour cells are given, the
     candidate's share of inner points on the photo's colours (`photo_colours`), `photo_colours_null` the
-    same share's `COLOUR_NULL_QUANTILE` quantile at placements elsewhere (nan both where not judged)."""
+    same share's `COLOUR_NULL_QUANTILE` quantile at placements elsewhere (nan both where not judged).
+    `fails_on_parts`: the contrast and every outline test pass but the candidate does not — its parts
+    (too many absent, or two absent and one on bare water), or its standing or the photo's colours:
+    `candidates.parted_turns` re-fits such a candidate turned."""
 
     score: float
     null_level: float
@@ -413,6 +416,7 @@ class Detection:
     on_bare_water: bool = False
     photo_colours: float = math.nan
     photo_colours_null: float = math.nan
+    fails_on_parts: bool = False
 
 
 def appearance_pair(c: Candidate, model: PhotoModel, frame: StereoHue, grey_frame: StereoGrey,
@@ -494,12 +498,12 @@ def detect(c: Candidate, model: PhotoModel, frame: StereoHue, rig: Rig, fit_para
     # where the contour rule bounds the target: the inner points on the photo's colours (module docstring)
     colours, colours_null = (photo_colours(c, model, cells, rig, seed) if cells is not None and frame.chroma is not None
                              else (math.nan, math.nan))
-    passed = (contrast >= p.min_contrast and (outer <= p.max_outer_on_target or excused)
+    but_parts = (contrast >= p.min_contrast and (outer <= p.max_outer_on_target or excused)
+                 and not judged < MIN_JUDGED_SHARE  # nan (the hue regime): not judged
+                 and not elsewhere > MAX_OFF_WATER)  # nan (the contour regime, no chroma): not judged
+    parts_fail = absent > p.max_absent_parts or on_bare_water  # nan (no part on hue): not a reason to reject
+    passed = (but_parts and not parts_fail
               and standing > 0.0  # a search of the pair at this scale finds as good elsewhere (module docstring)
-              and not absent > p.max_absent_parts  # nan (no part on hue): not a reason to reject
-              and not on_bare_water
-              and not judged < MIN_JUDGED_SHARE  # nan (the hue regime): not judged
-              and not elsewhere > MAX_OFF_WATER  # nan (the contour regime, no chroma): not judged
               and not colours < colours_null)  # nan (the hue regime, no cells): not judged
     outline = 1.0 if excused else 1.0 / (1.0 + math.exp(-(p.max_outer_on_target - outer) / 0.02))
     return Detection(score=score, null_level=q, contrast=contrast, outer_on_target=outer, passed=bool(passed),
@@ -507,4 +511,5 @@ def detect(c: Candidate, model: PhotoModel, frame: StereoHue, rig: Rig, fit_para
                      standing=standing, appearance=look[0], body_layout=look[1], absent_parts=absent,
                      bare_parts=bare, outline_judged=judged,
                      off_water=elsewhere, blob_beyond=beyond, on_bare_water=bool(on_bare_water),
-                     photo_colours=colours, photo_colours_null=colours_null)
+                     photo_colours=colours, photo_colours_null=colours_null,
+                     fails_on_parts=bool(but_parts and not passed))
