@@ -86,10 +86,11 @@ def test_the_compiled_spill_is_the_reference(fish_on_water):
 def test_the_distinctive_outline_changes_the_outline_only(fish_on_water):
     sc, model, frame, cues, truth = fish_on_water
     d_whole = detect(truth, model, frame, sc.rig, CFG.fitness, CFG.estimator)  # no chroma: each point counts 1
-    # with the chroma, the outline on another object is read too (nan without): the rest is the same
+    # with the chroma, the outline on another object and the body's colour edge to the water are read
+    # too (nan without): the rest is the same
     d_chroma = detect(truth, model, frame, sc.rig, CFG.fitness, WHOLE, chroma=cues.chroma)
-    assert d_chroma.off_water <= MAX_OFF_WATER
-    assert d_whole == dataclasses.replace(d_chroma, off_water=d_whole.off_water)
+    assert d_chroma.off_water <= MAX_OFF_WATER and d_chroma.body_gap >= CFG.fitness.contour_chroma
+    assert d_whole == dataclasses.replace(d_chroma, off_water=d_whole.off_water, body_gap=d_whole.body_gap)
     d = detect(truth, model, frame, sc.rig, CFG.fitness, CFG.estimator, chroma=cues.chroma)
     assert (d.score, d.contrast, d.standing) == (d_whole.score, d_whole.contrast, d_whole.standing)
     assert d.outer_on_target < d_whole.outer_on_target

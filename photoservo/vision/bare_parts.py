@@ -131,6 +131,36 @@ def stereo_water(model: PhotoModel, frame: StereoHue, chroma: StereoChroma) -> n
     return np.stack([water_chroma(frame.left, chroma.left, target), water_chroma(frame.right, chroma.right, target)])
 
 
+def body_gap(R: np.ndarray, t: np.ndarray, alpha: float, model: PhotoModel, frame: StereoHue,
+             chroma: StereoChroma, rig: Rig) -> np.ndarray:
+    """(2,) per camera, a*b* units (OpenCV 8-bit L*a*b*): how far ONE pose's body stands off the water
+    around it — the distance between the median a*b* at its inner points S_in on a target hue (the
+    body) and at its outer points S_out on hue off the target's hues (the water beside the model, as
+    `bare_flags` reads it); nan in a camera with fewer than `MIN_BODY` body or `MIN_WATER` water
+    points. Hue is the angle of a*b*: near the water's own colour a small shift of it turns the
+    angle across the target's hue tolerance, so a body on target hue a few a*b* units off the water
+    (harbour held-out 5 null 2266: a dull leaf under a squid's model, 9.8 and 11.4) is a colour the
+    water nearly has, not a creature's (tuned harbour answers 23-55)."""
+    p = project_model(R, t, alpha, model, rig)
+    target = target_hue_lut(model.target_hues)
+    out = np.full(2, np.nan)
+    for k, (uv_in, uv_out, hue, ab) in enumerate(((p.inner_left[0], p.outer_left[0], frame.left, chroma.left),
+                                                  (p.inner_right[0], p.outer_right[0], frame.right, chroma.right))):
+        ab_in, h_in = _chroma(uv_in, hue, ab)
+        ab_out, h_out = _chroma(uv_out, hue, ab)
+        body = target[h_in]
+        water = (h_out < HUE_BINS) & ~target[h_out]
+        if body.sum() >= MIN_BODY and water.sum() >= MIN_WATER:
+            out[k] = float(np.linalg.norm(np.median(ab_in[body], axis=0) - np.median(ab_out[water], axis=0)))
+    return out
+
+
+def _chroma(uv: np.ndarray, hue: np.ndarray, ab: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """At (N, 2) pixel coordinates (nearest pixel): a*b* (N, 2) and hue (N,) (NO_HUE outside the image)."""
+    ri, ci, inside = nearest_pixel(uv, hue.shape)
+    return ab[ri, ci].astype(np.float64), np.where(inside, hue[ri, ci], HUE_BINS).astype(np.int16)
+
+
 def off_water(R: np.ndarray, t: np.ndarray, alpha: float, model: PhotoModel, frame: StereoHue,
               chroma: StereoChroma, rig: Rig, edge: float, water: np.ndarray | None = None) -> np.ndarray:
     """(2,) per camera: the share of ONE pose's outer points S_out that land on hue, off the target's

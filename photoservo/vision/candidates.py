@@ -444,8 +444,9 @@ PARTED_HEADING_DEG = 45.0
 def parted_turns(results: list[tuple[Detection, Candidate]], searches: dict[str, PoseSearch], looks: dict,
                  p: EstimatorParams, seed: int = 0) -> Generator[int, None, list[tuple[Detection, Candidate]]]:
     """The candidates, re-ranked after each one that fails its parts alone (`Detection.fails_on_parts`:
-    its contrast and its outline pass, the outline judged and not on another object; more than
-    `max_absent_parts` of its parts absent, or two absent and one on bare water) was re-fitted
+    its contrast and its outline pass, the outline judged and not on another object, its body off the
+    water; more than `max_absent_parts` of its parts absent, or two absent and one on bare water) was
+    re-fitted
     turned: at each of PARTED_QUARTERS quarter turns about the photo mask's centroid
     (`twins.turned_about_centroid`), by a short GA (PARTED_HEADING_DEG); the fittest of
     them, when the hue fitness rose, replaces the candidate when it passes detection. An island's

@@ -101,6 +101,15 @@ away from the image's own water colour, the median a*b* of its pixels off the ta
 partly shares (renderer null 1849: a squid's model on a fish's brown band, outline on the fish's
 yellow and green) passes the outline test, whose spill counts target hues only.
 
+Where hue bounds the target, the body must also stand a colour edge off the water around it: the
+a*b* distance between the candidate's body (inner points on a target hue) and the water beside it
+(outer points on hue off the target's hues) at least `[fitness] contour_chroma` in one camera
+(`bare_parts.body_gap`). Hue is the angle of a*b*; a dull object a few units off the water's colour
+turns that angle across the tolerance with a small shift, and then agrees with a creature's model
+hue for hue while it is, to the image, nearly the water (harbour held-out 5 null 2266: a squid's
+model 55 mm long on a brown leaf, contrast 0.42, outline clean, 1 part absent; the body 9.8 and
+11.4 units off the water). The same colour edge the contour rule and `off_water` use.
+
 The appearance excuse is for an outline that differs from the photo's by a little (another
 individual's fins, a rim): where hue bounds the target it holds only while the blob of the target's
 hues under the candidate ends about where its model does — in the camera where it goes on less,
@@ -124,7 +133,7 @@ import numpy as np
 
 from photoservo.geometry import rotation_from_heading_tilt
 from photoservo.vision.appearance import StereoGrey, appearance, body_layout, body_points
-from photoservo.vision.bare_parts import bare_parts, off_water
+from photoservo.vision.bare_parts import bare_parts, body_gap, off_water
 from photoservo.vision.colour_cells import StereoCells, cell_share
 from photoservo.vision.contour import (
     TARGET_FLAT,
@@ -190,6 +199,7 @@ MAX_BLOB_BEYOND = 0.5
 COLOUR_PLACEMENTS = 200
 COLOUR_STREAM = 7
 COLOUR_NULL_QUANTILE = OUTLINE_NULL_QUANTILE
+# (the body's colour edge to the water, `bare_parts.body_gap`, is `[fitness] contour_chroma`: no constant of its own)
 
 
 def confidence(contrast: float, params: EstimatorParams) -> float:
@@ -364,7 +374,8 @@ class Detection:
              and not absent_parts > max_absent_parts
              and not (absent >= 2 and bare_parts >= 1 and not (bare_parts == 1 and layout))
              and not outline_judged < MIN_JUDGED_SHARE and not off_water > MAX_OFF_WATER
-             and standing > 0 and not photo_colours < photo_colours_null,
+             and standing > 0 and not photo_colours < photo_colours_null
+             and not body_gap < contour_chroma,
     excused = outer_on_target <= max_outer_if_appearance and layout and not blob_beyond > MAX_BLOB_BEYOND,
     layout = appearance, body_layout >= min_appearance
     (`appearance_pair`; module docstring);
@@ -387,7 +398,10 @@ class Detection:
     nan elsewhere), at most `MAX_OFF_WATER` to pass. `blob_beyond`: where hue bounds the target and
     the outline passes by the appearance excuse alone, the smaller camera's share of the footprint by
     which the blob of target hue under the candidate goes on past its outline (`footprint.blob_beyond`;
-    nan where not measured), at most `MAX_BLOB_BEYOND` for the excuse to hold. `on_bare_water`: the
+    nan where not measured), at most `MAX_BLOB_BEYOND` for the excuse to hold. `body_gap`: where hue
+    bounds the target, the larger camera's a*b* distance between the body and the water beside it
+    (`bare_parts.body_gap`; nan elsewhere or where a camera cannot judge), at least `[fitness]
+    contour_chroma` (a colour edge) to pass. `on_bare_water`: the
     bare-water rule rejects it (two or more parts absent, one of them on bare water and the layout
     inside not the photo's, or two on bare water: a float or another creature under the model, not the
     creature with a part hidden or another individual's limb lying elsewhere; `candidates.ranked`).
@@ -416,6 +430,7 @@ class Detection:
     on_bare_water: bool = False
     photo_colours: float = math.nan
     photo_colours_null: float = math.nan
+    body_gap: float = math.nan
     fails_on_parts: bool = False
 
 
@@ -494,13 +509,17 @@ def detect(c: Candidate, model: PhotoModel, frame: StereoHue, rig: Rig, fit_para
     elsewhere = (float(off_water(c.R_model, c.position_mm, c.alpha, model, frame, chroma, rig,
                                  fit_params.contour_chroma, water).min()) if frame.chroma is None and chroma is not None
                  else math.nan)
+    # where hue bounds the target: how far the body stands off the water beside it, the larger camera (module docstring)
+    gap = (float(np.max(body_gap(c.R_model, c.position_mm, c.alpha, model, frame, chroma, rig)))
+           if frame.chroma is None and chroma is not None else math.nan)
     on_bare_water = n_absent >= 2 and bare >= 1 and not (bare == 1 and layout)
     # where the contour rule bounds the target: the inner points on the photo's colours (module docstring)
     colours, colours_null = (photo_colours(c, model, cells, rig, seed) if cells is not None and frame.chroma is not None
                              else (math.nan, math.nan))
     but_parts = (contrast >= p.min_contrast and (outer <= p.max_outer_on_target or excused)
                  and not judged < MIN_JUDGED_SHARE  # nan (the hue regime): not judged
-                 and not elsewhere > MAX_OFF_WATER)  # nan (the contour regime, no chroma): not judged
+                 and not elsewhere > MAX_OFF_WATER  # nan (the contour regime, no chroma): not judged
+                 and not gap < fit_params.contour_chroma)  # nan (as off_water, or a camera without body or water): not judged
     parts_fail = absent > p.max_absent_parts or on_bare_water  # nan (no part on hue): not a reason to reject
     passed = (but_parts and not parts_fail
               and standing > 0.0  # a search of the pair at this scale finds as good elsewhere (module docstring)
@@ -510,6 +529,6 @@ def detect(c: Candidate, model: PhotoModel, frame: StereoHue, rig: Rig, fit_para
                      confidence=confidence(contrast, p) * outline, threshold=q + p.min_contrast * (1.0 - q),
                      standing=standing, appearance=look[0], body_layout=look[1], absent_parts=absent,
                      bare_parts=bare, outline_judged=judged,
-                     off_water=elsewhere, blob_beyond=beyond, on_bare_water=bool(on_bare_water),
+                     off_water=elsewhere, blob_beyond=beyond, on_bare_water=bool(on_bare_water), body_gap=gap,
                      photo_colours=colours, photo_colours_null=colours_null,
                      fails_on_parts=bool(but_parts and not passed))

@@ -486,6 +486,7 @@ def _candidate_json(c: Candidate, d: Detection, model: PhotoModel) -> dict:
         "outline_judged": round(d.outline_judged, 4) if np.isfinite(d.outline_judged) else None,
         "off_water": round(d.off_water, 4) if np.isfinite(d.off_water) else None,
         "blob_beyond": round(d.blob_beyond, 4) if np.isfinite(d.blob_beyond) else None,
+        "body_gap": round(d.body_gap, 2) if np.isfinite(d.body_gap) else None,
         "confidence": round(d.confidence, 4),
         "source": c.source,
     }
