@@ -64,3 +64,6 @@ def test_a_creature_stands_a_colour_edge_off_the_water_and_a_body_painted_near_i
     again = body_gap(c.R_model, c.position_mm, c.alpha, model, frame, moved, sc.rig)
     assert np.allclose(again, 5.0, atol=1.0)
 
+    # a pair without colour (a compact recording's grey planes, record.planes): not judged
+    grey = type(chroma)(left=np.full_like(chroma.left, 128), right=np.full_like(chroma.right, 128))
+    assert np.isnan(body_gap(c.R_model, c.position_mm, c.alpha, model, frame, grey, sc.rig)).all()

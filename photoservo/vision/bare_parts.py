@@ -54,6 +54,7 @@ MIN_WATER = 8  # a camera judges only with at least this many water points (oute
 MIN_BODY = 8  # ...and body points (inner points on target hue)...
 MIN_SPAN = 4.0  # ...and a body at least this far from the water in (grey, a*, b*) units
 WATER_STRIDE = 7  # `water_chroma` reads every this-th pixel of the water
+NEUTRAL_AB = 128  # OpenCV 8-bit L*a*b*: a* = b* = 128 is grey (no chroma)
 
 
 def _colours(uv: np.ndarray, grey: np.ndarray, ab: np.ndarray, hue: np.ndarray
@@ -137,7 +138,8 @@ def body_gap(R: np.ndarray, t: np.ndarray, alpha: float, model: PhotoModel, fram
     around it — the distance between the median a*b* at its inner points S_in on a target hue (the
     body) and at its outer points S_out on hue off the target's hues (the water beside the model, as
     `bare_flags` reads it); nan in a camera with fewer than `MIN_BODY` body or `MIN_WATER` water
-    points. Hue is the angle of a*b*: near the water's own colour a small shift of it turns the
+    points, or whose body points carry no chroma at all (a*b* all neutral: the grey planes a compact
+    recording replays, `record.planes`, hold no colour to judge by). Hue is the angle of a*b*: near the water's own colour a small shift of it turns the
     angle across the target's hue tolerance, so a body on target hue a few a*b* units off the water
     (harbour held-out 5 null 2266: a dull leaf under a squid's model, 9.8 and 11.4) is a colour the
     water nearly has, not a creature's (tuned harbour answers 23-55)."""
@@ -150,7 +152,9 @@ def body_gap(R: np.ndarray, t: np.ndarray, alpha: float, model: PhotoModel, fram
         ab_out, h_out = _chroma(uv_out, hue, ab)
         body = target[h_in]
         water = (h_out < HUE_BINS) & ~target[h_out]
-        if body.sum() >= MIN_BODY and water.sum() >= MIN_WATER:
+        # a body on hue with no chroma at all is a pair without colour (a compact recording's grey planes)
+        coloured = bool(np.any(ab_in[body] != NEUTRAL_AB))
+        if body.sum() >= MIN_BODY and water.sum() >= MIN_WATER and coloured:
             out[k] = float(np.linalg.norm(np.median(ab_in[body], axis=0) - np.median(ab_out[water], axis=0)))
     return out
 
