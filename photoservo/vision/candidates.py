@@ -21,7 +21,7 @@ import numpy as np
 from photoservo.vision.appearance import StereoGrey, appearance
 from photoservo.vision.contour import StereoChroma
 from photoservo.vision.colour_cells import StereoCells
-from photoservo.vision.detection import Detection, detect
+from photoservo.vision.detection import MAX_OFF_WATER, MIN_JUDGED_SHARE, Detection, detect
 from photoservo.vision.fitness import StereoHue, fitness, point_weight
 from photoservo.vision.parts import absent_parts
 from photoservo.vision.photo_model import PhotoModel
