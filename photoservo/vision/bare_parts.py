@@ -181,9 +181,7 @@ def off_water(R: np.ndarray, t: np.ndarray, alpha: float, model: PhotoModel, fra
                                            (p.outer_right[0], frame.right, chroma.right))):
         if not len(uv_out):
             continue
-        ri, ci, ok = nearest_pixel(uv_out, hue.shape)
-        h = np.where(ok, hue[ri, ci], HUE_BINS).astype(np.int16)
-        col = ab[ri, ci].astype(np.float64)
+        col, h = _chroma(uv_out, hue, ab)
         off = (h < HUE_BINS) & ~target[h]
         far = np.linalg.norm(col - water[k], axis=1) > edge
         out[k] = float((off & far).sum()) / len(uv_out)
