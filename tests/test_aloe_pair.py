@@ -143,6 +143,25 @@ def test_the_pot_is_seeded_at_its_size():
 
 
 @needs_aloe
+@pytest.mark.parametrize("seed", [3, 4])
+def test_the_pot_from_the_left_image_is_found_by_its_grown_island_refined(seed):
+    """The pot cut from the left image, seeds 3 and 4: the grown boxes' islands end on the flank of the
+    pot's peak (0.68-0.74), below the lead's small fit inside the pot (0.74, 72-80 % small), so the
+    grown island was not refined and its fit was no candidate. A grown island larger in the images than
+    the lead by more than the lead's own grown fits reach (contour_grow) is refined as the lead is
+    (0.85-0.86 at 1.5-4.7 % in size): found, at the pot's depth and size, from a grown island."""
+    from photoservo.vision.estimator import estimate
+
+    c, = real_cases(CFG.photo_model, scale=SCALE, targets=("pot",), variants=("left",), pair="aloe")
+    tr = c.truth
+    est = estimate(c.model, c.left, c.right, c.rig, CFG.ga, CFG.estimator, CFG.fitness, seed=seed)
+    assert est.found
+    assert est.candidates[0]["source"].startswith("grown")
+    assert abs(est.position_mm[2] / tr["distance_mm"] - 1) < 0.05
+    assert abs(tr["alpha_px_per_mm"] / est.alpha_px_per_mm - 1) < 0.15
+
+
+@needs_aloe
 def test_the_upright_leaf_at_0_6x_is_not_found_on_a_neighbouring_leaf():
     """The upright leaf cut at 0.6x, seed 1: its best candidate is a fit a third of its size on a
     neighbouring leaf's tip (0.53 where the standing's null, the model at that apparent size anywhere
