@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from photoservo.config import load_config
-from photoservo.vision.colour_cells import (
+from photoservo.vision.hs_cells import (
     CELL_HUES,
     CELL_MIN_SATURATION,
     CELL_SATURATIONS,

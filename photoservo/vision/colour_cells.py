@@ -9,7 +9,8 @@ levels by `CELL_SATURATIONS` saturation levels (OpenCV 8-bit HSV), a cell kept w
 `CELL_SHARE` of the target's pixels (a density: a badge, a spine or a highlight does not count). The
 pair's pixels whose (hue, saturation) lies in a kept cell are the photo's colours (`stereo_cells`);
 `cell_share` is the share of a pose's inner points on them (the worse camera). They tell a place only
-where they are a minority of the pair's pixels (`distinctive`).
+where they are a minority of the pair's pixels (`distinctive`). The table of cells and an image's pixels
+on it are vision/hs_cells.py's (OpenCV only: the photo-model builds the table).
 
 Measured on the real pairs at the true poses (scratch, seed 0): the leaves' inner points lie on the
 photo's colours 0.85-0.90 against 0.51-0.59 for the same model's 90th percentile elsewhere (by hue
@@ -22,16 +23,12 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-import cv2
 import numpy as np
 
 from photoservo.vision.fitness import nearest_pixel, project_uv
+from photoservo.vision.hs_cells import cell_image
 from photoservo.vision.rig import Rig
 
-CELL_HUES = 12  # OpenCV hues (0..179) per cell: 15 hue levels
-CELL_SATURATIONS = 32  # saturation levels (0..255) per cell: 8 levels
-CELL_MIN_SATURATION = 12  # below this a pixel is grey for the cells (the fitness' own floor is 60)
-CELL_SHARE = 0.02  # a cell is the photo's when it holds at least this share of the target's pixels
 # the cells tell a place only where the photo's colours are a minority of the pair: at most this share of
 # either image's pixels (`distinctive`). The real pairs' photos 0.11-0.47; the harbour generator's
 # many-hued fish whose colours are the water's 0.65-0.97 (1700, 1702, 1703), where the fish's own inner
@@ -45,30 +42,6 @@ class StereoCells:
 
     left: np.ndarray
     right: np.ndarray
-
-
-def _cell_index(hsv: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    return hsv[..., 0] // CELL_HUES, hsv[..., 1] // CELL_SATURATIONS
-
-
-def photo_cells(photo_bgr: np.ndarray, mask: np.ndarray, min_value: int) -> np.ndarray:
-    """(180 / CELL_HUES, 256 / CELL_SATURATIONS) bool: the cells holding >= CELL_SHARE of the target's
-    pixels (`mask` > 0) with saturation >= CELL_MIN_SATURATION and value >= `min_value`; all False
-    when there are none."""
-    hsv = cv2.cvtColor(photo_bgr, cv2.COLOR_BGR2HSV)
-    sel = (mask > 0) & (hsv[..., 1] >= CELL_MIN_SATURATION) & (hsv[..., 2] >= min_value)
-    table = np.zeros((-(-180 // CELL_HUES), -(-256 // CELL_SATURATIONS)))
-    h, s = _cell_index(hsv[sel])
-    np.add.at(table, (h, s), 1)
-    return table >= CELL_SHARE * max(1, int(sel.sum())) if sel.any() else table > 0
-
-
-def cell_image(bgr: np.ndarray, cells: np.ndarray, min_value: int) -> np.ndarray:
-    """(H, W) bool: pixels of `bgr` on one of `cells` (`photo_cells`), above the cells' saturation floor
-    and `min_value`."""
-    hsv = cv2.cvtColor(bgr, cv2.COLOR_BGR2HSV)
-    h, s = _cell_index(hsv)
-    return cells[h, s] & (hsv[..., 1] >= CELL_MIN_SATURATION) & (hsv[..., 2] >= min_value)
 
 
 def stereo_cells(left_bgr: np.ndarray, right_bgr: np.ndarray, cells: np.ndarray, min_value: int) -> StereoCells:

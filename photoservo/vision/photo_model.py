@@ -18,6 +18,7 @@ import cv2
 import numpy as np
 
 from photoservo.errors import InputError
+from photoservo.vision.hs_cells import photo_cells
 from photoservo.vision.sampling import brightness, photo_values
 
 HUE_BINS = 180
@@ -52,7 +53,7 @@ class PhotoModel:
     inner_value: (N_in,) float32 the photo's grey level at each inner point (the appearance cue,
         `vision/appearance.py`); empty for a model built without a photo (the cue is then off).
     inner_brightness: (N_in,) float32 the photo's brightness max(B, G, R) there (`appearance.body_layout`).
-    colour_cells: (15, 8) bool the photo's colours over hue and saturation (`colour_cells.photo_cells`);
+    colour_cells: (15, 8) bool the photo's colours over hue and saturation (`hs_cells.photo_cells`);
         empty for a model built without a photo (detection's cue on them is then off).
     """
 
@@ -321,12 +322,10 @@ def build_photo_model(photo_bgr: np.ndarray, params: PhotoModelParams,
     hues of the inner points and of every hue holding >= 1 % of the target's hued pixels,
     widened by `params.hue_tolerance`. `inner_value` holds the photo's grey at each inner point
     (`sampling.photo_values`), `inner_brightness` its brightness, `colour_cells` the photo's colours
-    over hue and saturation (`colour_cells.photo_cells`).
+    over hue and saturation (`hs_cells.photo_cells`).
 
     Raises InputError when the photo is not a colour image, no target separates, or the target
     carries no hue (all grey/white/dark)."""
-    from photoservo.vision.colour_cells import photo_cells  # it reads the fitness, which reads this module
-
     mask = target_mask(photo_bgr, params, roi)
     hue = hue_image(photo_bgr, params.min_saturation, params.min_value)
     x, y, w, h = cv2.boundingRect(mask)
