@@ -517,8 +517,11 @@ def grown_turns(results: list[tuple[Detection, Candidate]], searches: dict[str, 
     the search's stream is as before. `searches`, `looks`: as `grown_outlines`'. One generation per step."""
     out = list(results)
     for k, (d, c) in enumerate(results):
-        if (d.passed or d.contrast < p.min_contrast or not d.outer_on_target > p.max_outer_on_target
-                or d.outline_judged < MIN_JUDGED_SHARE or d.off_water > MAX_OFF_WATER or not np.isfinite(c.fitness)):
+        spills = (d.contrast >= p.min_contrast and d.outer_on_target > p.max_outer_on_target
+                  and not d.outline_judged < MIN_JUDGED_SHARE and not d.off_water > MAX_OFF_WATER)
+        # ...or it fails its parts alone with its outline spilling under the limit (renderer 1409: 27 % small,
+        # outline 0.106 against 0.11, four parts absent: its outer points too on the creature)
+        if d.passed or not (spills or d.fails_on_parts and d.outer_on_target > 0) or not np.isfinite(c.fitness):
             continue  # passes, fails its contrast, or its outline does not spill (nan cues: not a reason)
         search, fits = searches[c.source], []
         tries = [(q, f) for q in PARTED_QUARTERS for f in (math.sqrt(p.outline_grow), p.outline_grow)]
