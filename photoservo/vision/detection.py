@@ -16,12 +16,15 @@ A brighter, darker or colour-cast copy of a pair moves S and q together.
 
 Another individual's photo turns the creature's hues by a whole-body offset (the harbour's other
 individuals: up to 16 OpenCV steps against the tolerance of 10), so its fit can stand a little under
-`min_contrast` on hue while the photo's brightness layout shows inside it. A candidate whose layout
-is the photo's by both appearance cues (each at least `min_appearance`, as for the outline's excuse
-below; Pearson correlations, invariant to the image's gain and offset) needs no contrast level: its
-hue must only stand above what a search of the pair at its scale finds elsewhere (`standing` > 0).
-Harbour 2137 and 2327 (other individuals' squid and crab: contrast 0.29 and 0.26 at fits 3.9 and
-0.7 % off, cues 0.52 / 0.55 and 0.38 / 0.49) pass; a float or a leaf of one hue has no layout to show.
+`min_contrast` on hue while the photo's brightness layout shows inside it. Where hue bounds the target
+(not the contour rule's regime), a candidate whose layout is the photo's by both appearance cues (each
+at least `min_appearance`, as for the outline's excuse below; Pearson correlations, invariant to the
+image's gain and offset) needs no contrast level: its hue must only stand above what a search of the
+pair at its scale finds elsewhere (`standing` > 0). Harbour 2137 and 2327 (other individuals' squid
+and crab: contrast 0.29 and 0.26 at fits 3.9 and 0.7 % off, cues 0.52 / 0.55 and 0.38 / 0.49) pass; a
+float or a leaf of one hue has no layout to show. In the contour regime the contrast is not a hue
+offset's: there the excuse found the aloe pair's upright leaf on a neighbouring leaf (left image, seed
+3), so it does not apply.
 
 Candidates of different scales are compared by their `standing`: the same formula against what
 a search of the whole pair at the candidate's apparent scale would find where the creature is
@@ -379,7 +382,8 @@ class Detection:
     hues the water lacks; near 1 for a many-hued one whose hues include the water's; in between
     where the background holds the target's hues in patches) — the creature's outline must end
     where the model's does (a buoy or another species of the same colour usually spills over).
-    passed = (contrast >= min_contrast or layout) and (outer_on_target <= max_outer_on_target or excused)
+    passed = (contrast >= min_contrast or (layout and hue bounds the target))
+             and (outer_on_target <= max_outer_on_target or excused)
              and not absent_parts > max_absent_parts
              and not (absent >= 2 and bare_parts >= 1 and not (bare_parts == 1 and layout))
              and not outline_judged < MIN_JUDGED_SHARE and not off_water > MAX_OFF_WATER
@@ -526,7 +530,9 @@ def detect(c: Candidate, model: PhotoModel, frame: StereoHue, rig: Rig, fit_para
     # where the contour rule bounds the target: the inner points on the photo's colours (module docstring)
     colours, colours_null = (photo_colours(c, model, cells, rig, seed) if cells is not None and frame.chroma is not None
                              else (math.nan, math.nan))
-    but_parts = ((contrast >= p.min_contrast or layout) and (outer <= p.max_outer_on_target or excused)
+    # where hue bounds the target, the layout excuses a contrast short of its level (module docstring)
+    offset_excused = layout and frame.chroma is None
+    but_parts = ((contrast >= p.min_contrast or offset_excused) and (outer <= p.max_outer_on_target or excused)
                  and not judged < MIN_JUDGED_SHARE  # nan (the hue regime): not judged
                  and not elsewhere > MAX_OFF_WATER  # nan (the contour regime, no chroma): not judged
                  and not gap < fit_params.contour_chroma)  # nan (as off_water, or a camera without body or water): not judged
