@@ -501,6 +501,7 @@ def _candidate_json(c: Candidate, d: Detection, model: PhotoModel) -> dict:
         "off_water": round(d.off_water, 4) if np.isfinite(d.off_water) else None,
         "blob_beyond": round(d.blob_beyond, 4) if np.isfinite(d.blob_beyond) else None,
         "body_gap": round(d.body_gap, 2) if np.isfinite(d.body_gap) else None,
+        "body_colours": round(d.body_colours, 4) if np.isfinite(d.body_colours) else None,
         "confidence": round(d.confidence, 4),
         "source": c.source,
     }
