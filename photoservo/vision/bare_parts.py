@@ -40,8 +40,6 @@ px/mm); images: the pair's hue (`StereoHue`), grey (`appearance.StereoGrey`) and
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
-
 import numpy as np
 
 from photoservo.vision.appearance import StereoGrey
@@ -50,9 +48,6 @@ from photoservo.vision.fitness import StereoHue, nearest_pixel, project_model
 from photoservo.vision.parts import FOAM, absent_flags, under_foam
 from photoservo.vision.photo_model import HUE_BINS, PhotoModel, target_hue_lut
 from photoservo.vision.rig import Rig
-
-if TYPE_CHECKING:
-    from photoservo.vision.colour_cells import StereoCells
 
 BARE_Z = 2.0  # standard errors: a part's mean colour position closer to the water's than this is bare water
 MIN_WATER = 8  # a camera judges only with at least this many water points (outer points off target hue)...
@@ -165,26 +160,32 @@ def body_gap(R: np.ndarray, t: np.ndarray, alpha: float, model: PhotoModel, fram
 
 
 
-def body_colours(R: np.ndarray, t: np.ndarray, alpha: float, model: PhotoModel, frame: StereoHue,
-                 chroma: StereoChroma, cells: StereoCells, rig: Rig) -> np.ndarray:
-    """(2,) per camera: of ONE pose's body points (inner points on a target hue), the share that lie on
-    the photo's colours over hue and saturation (`cells`: `colour_cells.stereo_cells` of the pair); nan
-    in a camera with fewer than `MIN_BODY` body points or whose body carries no chroma at all (a compact
-    recording's grey planes, as `body_gap`). Hue is one angle of a colour; another species of the
-    creature's hue but another saturation (the renderer's crab under a squid's model: held-out 6 nulls
-    2431, 2467, held-out 4 null 2023: 0.05-0.14 in the larger camera) matches the model hue for hue
-    while few of its pixels hold the photo's colours (tuned answers, both generators: 0.31 or more)."""
+def body_relief(R: np.ndarray, t: np.ndarray, alpha: float, model: PhotoModel, frame: StereoHue,
+                value_frame: StereoGrey, rig: Rig) -> np.ndarray:
+    """(2,) per camera: how much ONE pose's body (inner points on a target hue) varies in brightness
+    against the photo at the same points — the coefficient of variation of the image's brightness
+    (`value_frame`, `appearance.stereo_value`) over the body points, over that of the photo's
+    (`model.inner_brightness`) at those points; nan in a camera with fewer than `MIN_BODY` body points,
+    or where either is dark or the photo's does not vary. A ratio of the image with itself and the
+    photo with itself (gain-invariant). A leaf or a float of one flat colour under a squid's model
+    (harbour held-out 2 null 1861, held-out 5 null 2266: 0.40, 0.46) varies less than half as much
+    as the photo's mottled body; a creature, shaded by the light and blurred, 0.88 or more (the tuned
+    answers, both generators)."""
+    if len(model.inner_brightness) != len(model.inner_uv):
+        return np.full(2, np.nan)
     p = project_model(R, t, alpha, model, rig)
     target = target_hue_lut(model.target_hues)
+    photo = model.inner_brightness.astype(np.float64)
     out = np.full(2, np.nan)
-    for k, (uv_in, hue, ab, on) in enumerate(((p.inner_left[0], frame.left, chroma.left, cells.left),
-                                              (p.inner_right[0], frame.right, chroma.right, cells.right))):
-        ab_in, h_in = _chroma(uv_in, hue, ab)
-        body = target[h_in]
-        if body.sum() < MIN_BODY or not np.any(ab_in[body] != NEUTRAL_AB):
+    for k, (uv_in, hue, value) in enumerate(((p.inner_left[0], frame.left, value_frame.left),
+                                             (p.inner_right[0], frame.right, value_frame.right))):
+        ri, ci, inside = nearest_pixel(uv_in, hue.shape)
+        body = inside & target[np.where(inside, hue[ri, ci], HUE_BINS)]
+        if body.sum() < MIN_BODY:
             continue
-        ri, ci, _ = nearest_pixel(uv_in[body], hue.shape)  # on a target hue: inside the image
-        out[k] = float(on[ri, ci].mean())
+        v, pv = value[ri[body], ci[body]].astype(np.float64), photo[body]
+        if v.mean() > 0 and pv.mean() > 0 and pv.std() > 0:
+            out[k] = float((v.std() / v.mean()) / (pv.std() / pv.mean()))
     return out
 
 def _chroma(uv: np.ndarray, hue: np.ndarray, ab: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -122,14 +122,13 @@ hue for hue while it is, to the image, nearly the water (harbour held-out 5 null
 model 55 mm long on a brown leaf, contrast 0.42, outline clean, 1 part absent; the body 9.8 and
 11.4 units off the water). The same colour edge the contour rule and `off_water` use.
 
-Where hue bounds the target, the body must also hold the photo's colours, not its hue alone: of the
-inner points on a target hue, at least `MIN_BODY_COLOURS` in the larger camera must lie on the photo's
-cells of hue and saturation (`vision/colour_cells.py`, `bare_parts.body_colours`). Another species of
-the creature's hue but another saturation matches the model hue for hue (renderer held-out 6 nulls
-2431 and 2467, held-out 4 null 2023: a squid's model on an orange crab, contrast 0.58-0.59, outline
-clean, 2 parts absent among the crab's legs; 0.05-0.14 of the body on the squid's colours); the
-tuned targets' answers 0.31 or more (harbour 1045, found 0.5 % off: the light shifts saturation).
-The share is the image's own (the pixels the hue test already accepts), not a level of the water.
+Where hue bounds the target, the body must also vary in brightness as the photo does: the coefficient
+of variation of the image's brightness over the body points, over the photo's at the same points, at
+least `MIN_BODY_RELIEF` (a half) in the larger camera (`bare_parts.body_relief`). A leaf or a float of
+one flat colour under a squid's model varies far less than the photo's mottled, shaded body (harbour
+held-out 2 null 1861, a leaf on blue water, 0.40; held-out 5 null 2266 0.46), a creature as much or
+more (the tuned answers 0.88 or more: shading adds to the photo's own layout; blur takes little). Both
+ratios are of an image with itself, so the light's gain cancels.
 
 The appearance excuse is for an outline that differs from the photo's by a little (another
 individual's fins, a rim): where hue bounds the target it holds only while the blob of the target's
@@ -154,7 +153,7 @@ import numpy as np
 
 from photoservo.geometry import rotation_from_heading_tilt
 from photoservo.vision.appearance import StereoGrey, appearance, body_layout, body_points
-from photoservo.vision.bare_parts import bare_parts, body_colours, body_gap, off_water
+from photoservo.vision.bare_parts import bare_parts, body_gap, body_relief, off_water
 from photoservo.vision.colour_cells import StereoCells, cell_share
 from photoservo.vision.contour import (
     TARGET_FLAT,
@@ -221,11 +220,11 @@ COLOUR_PLACEMENTS = 200
 COLOUR_STREAM = 7
 COLOUR_NULL_QUANTILE = OUTLINE_NULL_QUANTILE
 # (the body's colour edge to the water, `bare_parts.body_gap`, is `[fitness] contour_chroma`: no constant of its own)
-# where hue bounds the target, the least share of a candidate's body points (inner points on a target hue) on
-# the photo's colours over hue and saturation, in the larger camera (`bare_parts.body_colours`): renderer
-# look-alike nulls 2431, 2467 (held-out 6) and 2023 (held-out 4), a squid's model on a crab of its hue,
-# 0.05, 0.14, 0.13; the answers of the tuned targets (both generators, 120 scenes) 0.31 or more
-MIN_BODY_COLOURS = 0.2
+# where hue bounds the target, the least ratio of the body's brightness variation to the photo's at the same
+# points, in the larger camera (`bare_parts.body_relief`): harbour leaf nulls 1861 (held-out 2) and 2266
+# (held-out 5) under a squid's model 0.40, 0.46; the tuned targets' answers (both generators) 0.88 or more:
+# the body varies at least half as much as the photo's does
+MIN_BODY_RELIEF = 0.5
 
 
 def confidence(contrast: float, params: EstimatorParams) -> float:
@@ -402,7 +401,7 @@ class Detection:
              and not (absent >= 2 and bare_parts >= 1 and not (bare_parts == 1 and layout))
              and not outline_judged < MIN_JUDGED_SHARE and not off_water > MAX_OFF_WATER
              and standing > 0 and not photo_colours < photo_colours_null
-             and not body_gap < contour_chroma and not body_colours < MIN_BODY_COLOURS,
+             and not body_gap < contour_chroma and not body_relief < MIN_BODY_RELIEF,
     excused = outer_on_target <= max_outer_if_appearance and layout and not blob_beyond > MAX_BLOB_BEYOND,
     layout = appearance, body_layout >= min_appearance
     (`appearance_pair`; module docstring);
@@ -428,9 +427,9 @@ class Detection:
     nan where not measured), at most `MAX_BLOB_BEYOND` for the excuse to hold. `body_gap`: where hue
     bounds the target, the larger camera's a*b* distance between the body and the water beside it
     (`bare_parts.body_gap`; nan elsewhere or where a camera cannot judge), at least `[fitness]
-    contour_chroma` (a colour edge) to pass. `body_colours`: where hue bounds the target and the pair's
-    colour cells are given, the larger camera's share of body points on the photo's colours
-    (`bare_parts.body_colours`; nan elsewhere or where no camera judges), at least `MIN_BODY_COLOURS`
+    contour_chroma` (a colour edge) to pass. `body_relief`: where hue bounds the target, the larger
+    camera's ratio of the body's brightness variation to the photo's at the same points
+    (`bare_parts.body_relief`; nan elsewhere or where no camera judges), at least `MIN_BODY_RELIEF`
     to pass. `on_bare_water`: the
     bare-water rule rejects it (two or more parts absent, one of them on bare water and the layout
     inside not the photo's, or two on bare water: a float or another creature under the model, not the
@@ -461,7 +460,7 @@ class Detection:
     photo_colours: float = math.nan
     photo_colours_null: float = math.nan
     body_gap: float = math.nan
-    body_colours: float = math.nan
+    body_relief: float = math.nan
     fails_on_parts: bool = False
 
 
@@ -544,11 +543,10 @@ def detect(c: Candidate, model: PhotoModel, frame: StereoHue, rig: Rig, fit_para
     # where hue bounds the target: how far the body stands off the water beside it, the larger camera (module docstring)
     gap = (float(np.max(body_gap(c.R_model, c.position_mm, c.alpha, model, frame, chroma, rig)))
            if frame.chroma is None and chroma is not None else math.nan)
-    # where hue bounds the target: the body's points on the photo's colours, the larger camera (module docstring)
-    tinted = math.nan
-    if frame.chroma is None and chroma is not None and cells is not None:
-        shares = body_colours(c.R_model, c.position_mm, c.alpha, model, frame, chroma, cells, rig)
-        tinted = float(np.max(shares[np.isfinite(shares)])) if np.isfinite(shares).any() else math.nan
+    relief = math.nan  # where hue bounds the target: the body's brightness varies as the photo's (module docstring)
+    if frame.chroma is None and value_frame is not None:
+        ratios = body_relief(c.R_model, c.position_mm, c.alpha, model, frame, value_frame, rig)
+        relief = float(np.max(ratios[np.isfinite(ratios)])) if np.isfinite(ratios).any() else math.nan
     on_bare_water = n_absent >= 2 and bare >= 1 and not (bare == 1 and layout)
     # where the contour rule bounds the target: the inner points on the photo's colours (module docstring)
     colours, colours_null = (photo_colours(c, model, cells, rig, seed) if cells is not None and frame.chroma is not None
@@ -559,7 +557,7 @@ def detect(c: Candidate, model: PhotoModel, frame: StereoHue, rig: Rig, fit_para
                  and not judged < MIN_JUDGED_SHARE  # nan (the hue regime): not judged
                  and not elsewhere > MAX_OFF_WATER  # nan (the contour regime, no chroma): not judged
                  and not gap < fit_params.contour_chroma  # nan (as off_water, or a camera without body or water): not judged
-                 and not tinted < MIN_BODY_COLOURS)  # nan (the contour regime, no cells, or neither camera judges)
+                 and not relief < MIN_BODY_RELIEF)  # nan (the contour regime, no value frame, or neither camera judges)
     parts_fail = absent > p.max_absent_parts or on_bare_water  # nan (no part on hue): not a reason to reject
     passed = (but_parts and not parts_fail
               and standing > 0.0  # a search of the pair at this scale finds as good elsewhere (module docstring)
@@ -570,5 +568,5 @@ def detect(c: Candidate, model: PhotoModel, frame: StereoHue, rig: Rig, fit_para
                      standing=standing, appearance=look[0], body_layout=look[1], absent_parts=absent,
                      bare_parts=bare, outline_judged=judged,
                      off_water=elsewhere, blob_beyond=beyond, on_bare_water=bool(on_bare_water), body_gap=gap,
-                     photo_colours=colours, photo_colours_null=colours_null, body_colours=tinted,
+                     photo_colours=colours, photo_colours_null=colours_null, body_relief=relief,
                      fails_on_parts=bool(but_parts and not passed))

@@ -381,10 +381,10 @@ def acquisition(model: PhotoModel, left_bgr: np.ndarray, right_bgr: np.ndarray, 
                  foam=foam if p.foam_part_share < 1.0 else None)
     # the water's colour in each image, for detection's outline on another object (where hue bounds the target)
     looks["water"] = stereo_water(model, frame, looks["chroma"]) if frame.chroma is None else None
-    # ...and the pair's pixels on the photo's colours, for its inner points (where the contour rule bounds the
-    # target) or its body's (where hue does), where those colours are a minority of the pair (vision/colour_cells.py)
+    # ...and the pair's pixels on the photo's colours, for its inner points where the contour rule bounds the
+    # target and those colours are a minority of the pair (vision/colour_cells.py)
     cells = (stereo_cells(left_bgr, right_bgr, model.colour_cells, fit_params.min_value)
-             if model.colour_cells.any() else None)
+             if frame.chroma is not None and model.colour_cells.any() else None)
     looks["cells"] = cells if cells is not None and distinctive(cells) else None
     if provisional is not None and len(islands) == 1 and np.isfinite(firsts[0].fitness):
         provisional.append((detect(firsts[0], model, frame, rig, fit_params, p, seed=seed, **looks),
@@ -501,7 +501,7 @@ def _candidate_json(c: Candidate, d: Detection, model: PhotoModel) -> dict:
         "off_water": round(d.off_water, 4) if np.isfinite(d.off_water) else None,
         "blob_beyond": round(d.blob_beyond, 4) if np.isfinite(d.blob_beyond) else None,
         "body_gap": round(d.body_gap, 2) if np.isfinite(d.body_gap) else None,
-        "body_colours": round(d.body_colours, 4) if np.isfinite(d.body_colours) else None,
+        "body_relief": round(d.body_relief, 4) if np.isfinite(d.body_relief) else None,
         "confidence": round(d.confidence, 4),
         "source": c.source,
     }
