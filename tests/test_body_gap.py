@@ -35,6 +35,10 @@ def test_a_squid_model_on_a_leaf_is_not_found(monkeypatch):
     assert first["contrast"] >= P.min_contrast and first["outer_on_target"] <= P.max_outer_on_target
     assert first["absent_parts"] <= P.max_absent_parts and first["off_water"] <= detection.MAX_OFF_WATER
     monkeypatch.setattr(detection, "body_gap", lambda *a, **k: np.full(2, np.nan))  # not judged
+    # the leaf is flat too: the body's relief (`bare_parts.body_relief`, 0.46) rejects it as well
+    assert first["body_relief"] < detection.MIN_BODY_RELIEF
+    assert not estimate(model, sc.left, sc.right, sc.rig, CFG.ga, P, CFG.fitness, seed=766).found
+    monkeypatch.setattr(detection, "body_relief", lambda *a, **k: np.full(2, np.nan))  # neither judged
     assert estimate(model, sc.left, sc.right, sc.rig, CFG.ga, P, CFG.fitness, seed=766).found
 
 
