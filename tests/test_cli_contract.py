@@ -151,7 +151,9 @@ def test_json_outputs_are_strict(capsys):
     def strict(text: str):
         return json.loads(text, parse_constant=lambda c: (_ for _ in ()).throw(ValueError(c)))
 
-    rc = main(["estimate", *STEREO, "--json", "--set", "estimator.min_contrast=1.5"])  # contrast <= 1: nothing can pass
+    # contrast and both appearance cues are <= 1: no contrast passes and none is excused by the layout
+    rc = main(["estimate", *STEREO, "--json",
+               "--set", "estimator.min_contrast=1.5", "--set", "estimator.min_appearance=1.5"])
     out = capsys.readouterr().out
     assert rc == 1
     js = strict(out)
