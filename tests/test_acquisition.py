@@ -57,8 +57,7 @@ def test_split_pieces_group_into_one_seed(split_crab):
 
 def test_split_creature_is_found_whole(split_crab):
     """Found, and the size is the whole creature's (alpha within 4 %), not a piece's; without
-    blob groups and the grown window the best fit is a piece (alpha 15 %+ too large; grown_turns off too:
-    the piece's fit, failing its parts with its outline spilling under the limit, is re-fitted grown)."""
+    blob groups and the grown window the best fit is a piece (alpha 15 %+ too large)."""
     sc, model = split_crab
     a_true = sc.truth["alpha_px_per_mm"]
     est = estimate(model, sc.left, sc.right, sc.rig, CFG.ga, CFG.estimator, CFG.fitness, seed=0)
@@ -66,7 +65,7 @@ def test_split_creature_is_found_whole(split_crab):
     assert abs(est.alpha_px_per_mm / a_true - 1) < 0.04
     t = np.array(sc.truth["position_mm"])
     assert np.linalg.norm(est.position_mm - t) < 0.03 * t[2]
-    pieces_only = dataclasses.replace(CFG.estimator, window_grow=0.0, group_reach=0.0, grown_turns=False)
+    pieces_only = dataclasses.replace(CFG.estimator, window_grow=0.0, group_reach=0.0)
     old = estimate(model, sc.left, sc.right, sc.rig, CFG.ga, pieces_only, CFG.fitness, seed=0)
     assert old.candidates[0]["alpha_px_per_mm"] / a_true - 1 > 0.15
 

@@ -5,10 +5,9 @@ standing (`ranked`, vision/detection.py; where the contour rule scores, those wh
 two surfaces last: `same_surface_first`), the first candidate's twin chosen by the appearance cue
 (`appearance_twin`), the candidates failing their outline alone tried grown (`grown_outlines`), those
 failing their parts alone re-fitted at quarter turns (`parted_turns`), those whose outline spills
-(or that fail their parts alone, spilling under the limit) re-fitted turned and grown (`grown_turns`), and
-the first, when it passes, searched again at the depth both images see (`stereo_depth`). Each search step
-is a generator yielding the GA generations it ran (`pose_search.drive` runs one to its end; the tracker
-spreads them over camera frames)."""
+re-fitted turned and grown (`grown_turns`), and the first, when it passes, searched again at the
+depth both images see (`stereo_depth`). Each search step is a generator yielding the GA generations it ran (`pose_search.drive` runs one to its end; the
+tracker spreads them over camera frames)."""
 
 from __future__ import annotations
 
@@ -503,8 +502,7 @@ def grown_about_centroid(R: np.ndarray, t: np.ndarray, alpha: float, model: Phot
 def grown_turns(results: list[tuple[Detection, Candidate]], searches: dict[str, PoseSearch], looks: dict,
                 p: EstimatorParams, seed: int = 0) -> Generator[int, None, list[tuple[Detection, Candidate]]]:
     """The candidates, re-ranked after each one whose outline spills (its contrast passes, its outline
-    does not, judged and not on another object: vision/detection.py), whatever its parts say, or that
-    fails its parts alone (`Detection.fails_on_parts`) with its outline spilling under the limit, was
+    does not, judged and not on another object: vision/detection.py), whatever its parts say, was
     re-fitted turned and grown: at each of PARTED_QUARTERS quarter turns about the photo mask's centroid
     (`twins.turned_about_centroid`) and grown about it (`grown_about_centroid`) by sqrt(`outline_grow`)
     and `outline_grow`, each by a short GA (heading +- PARTED_HEADING_DEG). Of the re-fits that fit the
@@ -515,19 +513,12 @@ def grown_turns(results: list[tuple[Detection, Candidate]], searches: dict[str, 
     20-92 degrees, its outer points on the creature and its parts beside the creature's), below the
     truth's fitness; growing alone keeps the heading (`grown_outlines`), turning alone the size
     (`parted_turns`). In 2138 the re-fit turned back a quarter and grown 1.35 x passes at 0.7005
-    against the candidate's 0.7009, the fittest re-fit (0.715, unturned) does not. A fit shrunk less
-    spills less: renderer 1409's island ends 27 % small with its outline at 0.106 against the limit
-    0.11 and four parts absent (failing its parts alone, the parted turns keep its size); grown, it
-    passes 0.3 % off. A fit whose outline does not spill at all is not shrunk inside anything. Own
-    random streams (`Generator.spawn`, one per try whether it runs or not): the search's stream is as
-    before. `searches`, `looks`: as `grown_outlines`'. One generation per step."""
+    against the candidate's 0.7009, the fittest re-fit (0.715, unturned) does not. Own random streams (`Generator.spawn`, one per try whether it runs or not):
+    the search's stream is as before. `searches`, `looks`: as `grown_outlines`'. One generation per step."""
     out = list(results)
     for k, (d, c) in enumerate(results):
-        spills = (d.contrast >= p.min_contrast and d.outer_on_target > p.max_outer_on_target
-                  and not d.outline_judged < MIN_JUDGED_SHARE and not d.off_water > MAX_OFF_WATER)
-        # ...or it fails its parts alone with its outline spilling under the limit (renderer 1409: 27 % small,
-        # outline 0.106 against 0.11, four parts absent: its outer points too on the creature)
-        if d.passed or not (spills or d.fails_on_parts and d.outer_on_target > 0) or not np.isfinite(c.fitness):
+        if (d.passed or d.contrast < p.min_contrast or not d.outer_on_target > p.max_outer_on_target
+                or d.outline_judged < MIN_JUDGED_SHARE or d.off_water > MAX_OFF_WATER or not np.isfinite(c.fitness)):
             continue  # passes, fails its contrast, or its outline does not spill (nan cues: not a reason)
         search, fits = searches[c.source], []
         tries = [(q, f) for q in PARTED_QUARTERS for f in (math.sqrt(p.outline_grow), p.outline_grow)]

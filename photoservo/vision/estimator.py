@@ -136,8 +136,7 @@ class EstimatorParams:
     outline_grow: float  # when the first candidate fails, one failing its outline alone is tried grown by sqrt(this)
     # and this (`grown_outlines`; 1 = off)
     parted_turns: bool  # ...and one failing its parts alone re-fitted at quarter turns (`candidates.parted_turns`)
-    grown_turns: bool  # ...and one whose outline spills (or fails its parts alone, spilling under the limit) re-fitted
-    # at quarter turns, grown (`candidates.grown_turns`)
+    grown_turns: bool  # ...and one whose outline spills re-fitted at quarter turns, grown (`candidates.grown_turns`)
     foam_bridge: bool  # seed islands also from pieces joined across foam, some paired alone (`seeding.bridged_pairs`)
     passed_standing_ratio: float  # a candidate that passes ranks first when it stands >= this x the top, which fails
     twin_appearance: bool  # let the appearance cue choose between the first candidate and its head-to-tail twin
