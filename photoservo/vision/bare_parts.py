@@ -159,7 +159,6 @@ def body_gap(R: np.ndarray, t: np.ndarray, alpha: float, model: PhotoModel, fram
     return out
 
 
-
 def body_relief(R: np.ndarray, t: np.ndarray, alpha: float, model: PhotoModel, frame: StereoHue,
                 value_frame: StereoGrey, rig: Rig) -> np.ndarray:
     """(2,) per camera: how much ONE pose's body (inner points on a target hue) varies in brightness
@@ -187,6 +186,7 @@ def body_relief(R: np.ndarray, t: np.ndarray, alpha: float, model: PhotoModel, f
         if v.mean() > 0 and pv.mean() > 0 and pv.std() > 0:
             out[k] = float((v.std() / v.mean()) / (pv.std() / pv.mean()))
     return out
+
 
 def _chroma(uv: np.ndarray, hue: np.ndarray, ab: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """At (N, 2) pixel coordinates (nearest pixel): a*b* (N, 2) and hue (N,) (NO_HUE outside the image)."""
