@@ -34,7 +34,8 @@ def test_lower_priority_nices_this_process_and_its_children_but_not_the_kept_one
     assert out.returncode == 0, out.stderr
     got = json.loads(out.stdout)
     base = got["base"]
-    assert got["main"] == got["worker"] == got["other"] == base + 5, got
+    # the kernel clamps nice at 19: a suite started at nice 15 or more asks for 20 and gets 19
+    assert got["main"] == got["worker"] == got["other"] == min(base + 5, 19), got
     assert got["kept"] == base, got
     assert got["done"].startswith(f"nice {base + 5} for ") and "of 2 processes" in got["done"], got
 
