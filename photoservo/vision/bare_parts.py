@@ -76,6 +76,15 @@ def bare_flags(R: np.ndarray, t: np.ndarray, alpha: float, model: PhotoModel, fr
     check counts them, `foam_share` as there (`parts.absent_flags`); bare (n_parts,) bool, absent
     on bare water in both cameras). `labels`:
     `parts.model_parts` of the model."""
+    absent, bare = camera_bare_flags(R, t, alpha, model, frame, grey_frame, chroma, rig, labels, z, foam_share)
+    return absent, bare[0] & bare[1]
+
+
+def camera_bare_flags(R: np.ndarray, t: np.ndarray, alpha: float, model: PhotoModel, frame: StereoHue,
+                      grey_frame: StereoGrey, chroma: StereoChroma, rig: Rig, labels: np.ndarray,
+                      z: float = BARE_Z, foam_share: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
+    """`bare_flags` per camera: (absent (2, n_parts), bare (2, n_parts): absent in that camera and on
+    bare water there)."""
     p = project_model(R, t, alpha, model, rig)
     n = int(labels.max()) + 1 if len(labels) else 0
     target = target_hue_lut(model.target_hues)
@@ -106,7 +115,7 @@ def bare_flags(R: np.ndarray, t: np.ndarray, alpha: float, model: PhotoModel, fr
             m = (labels == a) & (pix >= 0)
             distinct = len(np.unique(pix[m]))
             bare[k, a] = distinct > 0 and float(x[m].mean()) < z * s / np.sqrt(distinct)
-    return absent, bare[0] & bare[1]
+    return absent, bare
 
 
 def bare_parts(R: np.ndarray, t: np.ndarray, alpha: float, model: PhotoModel, frame: StereoHue,
@@ -114,8 +123,18 @@ def bare_parts(R: np.ndarray, t: np.ndarray, alpha: float, model: PhotoModel, fr
                z: float = BARE_Z, foam_share: float = 1.0) -> tuple[int, int]:
     """(absent, bare): the worse camera's count of absent parts and how many parts lie on bare
     water in both cameras (`bare_flags`)."""
-    absent, bare = bare_flags(R, t, alpha, model, frame, grey_frame, chroma, rig, labels, z, foam_share)
-    return int(absent.sum(axis=1).max()) if absent.size else 0, int(bare.sum())
+    return bare_counts(R, t, alpha, model, frame, grey_frame, chroma, rig, labels, z, foam_share)[:2]
+
+
+def bare_counts(R: np.ndarray, t: np.ndarray, alpha: float, model: PhotoModel, frame: StereoHue,
+                grey_frame: StereoGrey, chroma: StereoChroma, rig: Rig, labels: np.ndarray,
+                z: float = BARE_Z, foam_share: float = 1.0) -> tuple[int, int, int]:
+    """(absent, bare, bare_any): `bare_parts`, and how many parts lie on bare water in at least one
+    camera that misses them (`camera_bare_flags`): 0 when every absent part leaves a trace of the
+    body's colour wherever it is absent."""
+    absent, bare = camera_bare_flags(R, t, alpha, model, frame, grey_frame, chroma, rig, labels, z, foam_share)
+    return (int(absent.sum(axis=1).max()) if absent.size else 0, int((bare[0] & bare[1]).sum()),
+            int((bare[0] | bare[1]).sum()))
 
 
 def water_chroma(hue: np.ndarray, ab: np.ndarray, target: np.ndarray) -> np.ndarray:
