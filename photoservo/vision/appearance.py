@@ -49,7 +49,7 @@ import numpy as np
 from photoservo.vision.fitness import StereoHue, nearest_pixel
 from photoservo.vision.photo_model import PhotoModel, target_hue_lut
 from photoservo.vision.rig import Rig, project_points
-from photoservo.vision.sampling import brightness, grey, image_values, sampling_pitch
+from photoservo.vision.sampling import brightness, grey, image_values, sampling_pitch, saturation
 
 MIN_POINTS = 8  # a camera whose image holds fewer inner points on target hue gives no correlation
 BODY_MARGIN_PX = 1.5  # body_points: inner points at least this far (image px) inside the photo's outline
@@ -71,6 +71,11 @@ def stereo_grey(left_bgr: np.ndarray, right_bgr: np.ndarray) -> StereoGrey:
 def stereo_value(left_bgr: np.ndarray, right_bgr: np.ndarray) -> StereoGrey:
     """Brightness images (`brightness`) of a stereo pair (BGR uint8) for `body_layout`."""
     return StereoGrey(left=brightness(left_bgr), right=brightness(right_bgr))
+
+
+def stereo_saturation(left_bgr: np.ndarray, right_bgr: np.ndarray) -> StereoGrey:
+    """Saturation images (`sampling.saturation`) of a stereo pair (BGR uint8) for `bare_parts.body_purity`."""
+    return StereoGrey(left=saturation(left_bgr), right=saturation(right_bgr))
 
 
 def detrended(values: np.ndarray, uv: np.ndarray) -> np.ndarray:

@@ -207,6 +207,36 @@ def body_relief(R: np.ndarray, t: np.ndarray, alpha: float, model: PhotoModel, f
     return out
 
 
+def body_purity(R: np.ndarray, t: np.ndarray, alpha: float, model: PhotoModel, frame: StereoHue,
+                saturation_frame: StereoGrey, rig: Rig) -> np.ndarray:
+    """(2,) per camera: how much purer ONE pose's body (inner points on a target hue) is in colour than
+    the photo at the same points — the median saturation of the image there (`saturation_frame`,
+    `appearance.stereo_saturation`) over the photo's median (`model.inner_saturation`); nan in a camera
+    with fewer than `MIN_BODY` body points or where the photo's carries no saturation. Saturation does
+    not move with the light's gain, and what lies between the camera and a creature — haze, blur into
+    the water beside it, glare — only dilutes its colour: the renderer's and the harbour's creatures,
+    same photo or another individual's, read 0.74-1.11 at their answers (tuned, both generators). A
+    look-alike of another species in a purer colour of the creature's hue reads more (renderer held-out
+    6 nulls 2431, 2467 and held-out 4 null 2023: the orange crab under the pale squid's model, 1.37-1.42;
+    harbour held-out 7 null 2605, a crab under a squid's model, 1.39)."""
+    if len(model.inner_saturation) != len(model.inner_uv):
+        return np.full(2, np.nan)
+    p = project_model(R, t, alpha, model, rig)
+    target = target_hue_lut(model.target_hues)
+    photo = model.inner_saturation.astype(np.float64)
+    out = np.full(2, np.nan)
+    for k, (uv_in, hue, sat) in enumerate(((p.inner_left[0], frame.left, saturation_frame.left),
+                                           (p.inner_right[0], frame.right, saturation_frame.right))):
+        ri, ci, inside = nearest_pixel(uv_in, hue.shape)
+        body = inside & target[np.where(inside, hue[ri, ci], HUE_BINS)]
+        if body.sum() < MIN_BODY:
+            continue
+        ps = float(np.median(photo[body]))
+        if ps > 0:
+            out[k] = float(np.median(sat[ri[body], ci[body]])) / ps
+    return out
+
+
 def _chroma(uv: np.ndarray, hue: np.ndarray, ab: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """At (N, 2) pixel coordinates (nearest pixel): a*b* (N, 2) and hue (N,) (NO_HUE outside the image)."""
     ri, ci, inside = nearest_pixel(uv, hue.shape)

@@ -383,7 +383,8 @@ def appearance_twin(first: tuple[Detection, Candidate], search: PoseSearch, grey
                     p: EstimatorParams, seed: int = 0, value_frame: StereoGrey | None = None,
                     parts: np.ndarray | None = None, chroma: StereoChroma | None = None,
                     weight: np.ndarray | None = None, foam: StereoHue | None = None,
-                    cells: StereoCells | None = None) -> Generator[int, None, tuple[Detection, Candidate]]:
+                    cells: StereoCells | None = None, saturation_frame: StereoGrey | None = None
+                    ) -> Generator[int, None, tuple[Detection, Candidate]]:
     """The chosen candidate or its head-to-tail twin at the same place (`PoseSearch.turned_steps`:
     turned about the photo mask's centroid, refined by a short GA in each of TURNED_WINDOWS in
     turn), decided by the appearance cue (`vision/appearance.py`): the hue fitness scores a
@@ -395,8 +396,9 @@ def appearance_twin(first: tuple[Detection, Candidate], search: PoseSearch, grey
     without a search. `value_frame` (`appearance.stereo_value`): the twin's detection may excuse an
     outline spill as the candidate's may (vision/detection.py); `parts` (the model's
     `parts.model_parts`), `chroma` (the pair's a*b* planes), `weight` (their hues' distinctive
-    weight) and `foam` (the hue the parts check reads, `parts.foam_marked`): as the candidate's
-    detection had them. One generation per step; returns (detection, candidate)."""
+    weight), `foam` (the hue the parts check reads, `parts.foam_marked`), `cells` and `saturation_frame`
+    (`appearance.stereo_saturation`): as the candidate's detection had them. One generation per step;
+    returns (detection, candidate)."""
     d, c = first
     model, frame, rig = search.model, search.frame, search.rig
 
@@ -415,7 +417,8 @@ def appearance_twin(first: tuple[Detection, Candidate], search: PoseSearch, grey
         return first
     twin = yield from aspect_refined(search, twin, p)
     d_t = detect(twin, model, frame, rig, search.fit_params, p, seed=seed, grey_frame=grey_frame,
-                 value_frame=value_frame, parts=parts, chroma=chroma, weight=weight, foam=foam, cells=cells)
+                 value_frame=value_frame, parts=parts, chroma=chroma, weight=weight, foam=foam, cells=cells,
+                 saturation_frame=saturation_frame)
     if d.passed and not d_t.passed:
         return first
     return d_t, twin

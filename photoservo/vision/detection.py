@@ -138,6 +138,16 @@ held-out 2 null 1861, a leaf on blue water, 0.40; held-out 5 null 2266 0.46), a 
 more (the tuned answers 0.88 or more: shading adds to the photo's own layout; blur takes little). Both
 ratios are of an image with itself, so the light's gain cancels.
 
+Where hue bounds the target, the body must also be no purer in colour than the photo: the median
+saturation (HSV's S) of the image at the body points over the photo's at the same points at most
+`MAX_BODY_PURITY` in one camera (`bare_parts.body_purity`). Saturation does not move with the light's
+gain, and what lies between the camera and a creature (haze, blur into the water, glare) only dilutes
+its colour; another individual's photo is coloured differently, but the creatures' answers read 0.74-1.11
+(tuned, both generators). Another species of the creature's hue in a purer colour reads more: the
+renderer's vivid orange crab under the pale squid's model (held-out 6 nulls 2431, 2467 and held-out 4
+null 2023: 1.37-1.42; contrast 0.58-0.67, outline, parts, water, colour edge and relief all pass, the crab
+mottled as the squid is), the harbour's crab under a squid's model (held-out 7 null 2605: 1.39).
+
 The appearance excuse is for an outline that differs from the photo's by a little (another
 individual's fins, a rim): where hue bounds the target it holds only while the blob of the target's
 hues under the candidate ends about where its model does — in the camera where it goes on less,
@@ -161,7 +171,7 @@ import numpy as np
 
 from photoservo.geometry import rotation_from_heading_tilt
 from photoservo.vision.appearance import StereoGrey, appearance, body_layout, body_points
-from photoservo.vision.bare_parts import bare_counts, body_gap, body_relief, off_water
+from photoservo.vision.bare_parts import bare_counts, body_gap, body_purity, body_relief, off_water
 from photoservo.vision.colour_cells import StereoCells, cell_share
 from photoservo.vision.contour import (
     TARGET_FLAT,
@@ -238,6 +248,11 @@ MIN_BODY_RELIEF = 0.5
 # docstring): another individual's crabs harbour 1235, 2123, 2351, 2501, 2555 at fits 0.5-3.4 % off
 # 0.000-0.022; look-alikes of another species (harbour nulls 1565, 1577, 1625) 0.070-0.099
 CLEAN_OUTLINE = 0.25
+# where hue bounds the target, the most by which the body's median saturation may exceed the photo's at the same
+# points, in both cameras (`bare_parts.body_purity`): the renderer's orange crab under the pale squid's model
+# (held-out 6 nulls 2431, 2467, held-out 4 null 2023) 1.37-1.42, the harbour's crab under a squid's model (held-out
+# 7 null 2605) 1.39; the tuned targets' answers (both generators, same photo or another individual's) 1.11 or less
+MAX_BODY_PURITY = 1.25
 
 
 def confidence(contrast: float, params: EstimatorParams) -> float:
@@ -414,7 +429,8 @@ class Detection:
              and not (absent >= 2 and bare_parts >= 1 and not (bare_parts == 1 and layout))
              and not outline_judged < MIN_JUDGED_SHARE and not off_water > MAX_OFF_WATER
              and standing > 0 and not photo_colours < photo_colours_null
-             and not body_gap < contour_chroma and not body_relief < MIN_BODY_RELIEF,
+             and not body_gap < contour_chroma and not body_relief < MIN_BODY_RELIEF
+             and not body_purity > MAX_BODY_PURITY,
     excused = outer_on_target <= max_outer_if_appearance and layout and not blob_beyond > MAX_BLOB_BEYOND,
     legs_elsewhere = hue bounds the target and no absent part on bare water in any camera missing it
                      and outer_on_target <= CLEAN_OUTLINE · max_outer_on_target
@@ -446,7 +462,9 @@ class Detection:
     contour_chroma` (a colour edge) to pass. `body_relief`: where hue bounds the target, the larger
     camera's ratio of the body's brightness variation to the photo's at the same points
     (`bare_parts.body_relief`; nan elsewhere or where no camera judges), at least `MIN_BODY_RELIEF`
-    to pass. `on_bare_water`: the
+    to pass. `body_purity`: where hue bounds the target, the smaller camera's ratio of the body's median
+    saturation to the photo's at the same points (`bare_parts.body_purity`; nan elsewhere, without a
+    saturation frame or where no camera judges), at most `MAX_BODY_PURITY` to pass. `on_bare_water`: the
     bare-water rule rejects it (two or more parts absent, one of them on bare water and the layout
     inside not the photo's, or two on bare water: a float or another creature under the model, not the
     creature with a part hidden or another individual's limb lying elsewhere; `candidates.ranked`).
@@ -477,6 +495,7 @@ class Detection:
     photo_colours_null: float = math.nan
     body_gap: float = math.nan
     body_relief: float = math.nan
+    body_purity: float = math.nan
     fails_on_parts: bool = False
 
 
@@ -496,7 +515,7 @@ def detect(c: Candidate, model: PhotoModel, frame: StereoHue, rig: Rig, fit_para
            value_frame: StereoGrey | None = None, parts: np.ndarray | None = None,
            chroma: StereoChroma | None = None, weight: np.ndarray | None = None,
            water: np.ndarray | None = None, foam: StereoHue | None = None,
-           cells: StereoCells | None = None) -> Detection:
+           cells: StereoCells | None = None, saturation_frame: StereoGrey | None = None) -> Detection:
     """The detection test of one candidate (see `Detection`); `seed` draws the null placements;
     `grey_frame` / `value_frame` (`appearance.stereo_grey` / `stereo_value` of the pair): the
     appearance cues that may excuse an outline spill (module docstring; without them, none);
@@ -509,7 +528,9 @@ def detect(c: Candidate, model: PhotoModel, frame: StereoHue, rig: Rig, fit_para
     rule read instead of `frame`: a part with `foam_part_share` of its points on foam is not judged
     (module docstring); `cells`: the pair's pixels on the photo's colours (`colour_cells.stereo_cells`),
     which, where the contour rule bounds the target, the candidate's inner points must lie on as often as
-    the model's placements elsewhere do at their upper quantile (`photo_colours`; module docstring)."""
+    the model's placements elsewhere do at their upper quantile (`photo_colours`; module docstring);
+    `saturation_frame` (`appearance.stereo_saturation` of the pair): the body's colour against the photo's,
+    where hue bounds the target (`bare_parts.body_purity`; without it, not judged)."""
     strict = dataclasses.replace(fit_params, combine="min")
     score = float(fitness(c.R_model, c.position_mm, c.alpha, model, frame, rig, strict)[0])
     rng = np.random.default_rng(seed)
@@ -563,6 +584,10 @@ def detect(c: Candidate, model: PhotoModel, frame: StereoHue, rig: Rig, fit_para
     if frame.chroma is None and value_frame is not None:
         ratios = body_relief(c.R_model, c.position_mm, c.alpha, model, frame, value_frame, rig)
         relief = float(np.max(ratios[np.isfinite(ratios)])) if np.isfinite(ratios).any() else math.nan
+    purity = math.nan  # where hue bounds the target: the body's colour no purer than the photo's (module docstring)
+    if frame.chroma is None and saturation_frame is not None:
+        ratios = body_purity(c.R_model, c.position_mm, c.alpha, model, frame, saturation_frame, rig)
+        purity = float(np.min(ratios[np.isfinite(ratios)])) if np.isfinite(ratios).any() else math.nan
     on_bare_water = n_absent >= 2 and bare >= 1 and not (bare == 1 and layout)
     # where the contour rule bounds the target: the inner points on the photo's colours (module docstring)
     colours, colours_null = (photo_colours(c, model, cells, rig, seed) if cells is not None and frame.chroma is not None
@@ -573,7 +598,8 @@ def detect(c: Candidate, model: PhotoModel, frame: StereoHue, rig: Rig, fit_para
                  and not judged < MIN_JUDGED_SHARE  # nan (the hue regime): not judged
                  and not elsewhere > MAX_OFF_WATER  # nan (the contour regime, no chroma): not judged
                  and not gap < fit_params.contour_chroma  # nan (as off_water, or a camera without body or water): not judged
-                 and not relief < MIN_BODY_RELIEF)  # nan (the contour regime, no value frame, or neither camera judges)
+                 and not relief < MIN_BODY_RELIEF  # nan (the contour regime, no value frame, or neither camera judges)
+                 and not purity > MAX_BODY_PURITY)  # nan (the contour regime, no saturation frame, no camera judges)
     # where hue bounds the target, one part more may be absent when none lies on bare water in any camera and
     # the outline is clean: another individual's legs lying elsewhere than the photo's (module docstring)
     legs_elsewhere = (absent > p.max_absent_parts and frame.chroma is None and bare_any == 0
@@ -589,5 +615,5 @@ def detect(c: Candidate, model: PhotoModel, frame: StereoHue, rig: Rig, fit_para
                      standing=standing, appearance=look[0], body_layout=look[1], absent_parts=absent,
                      bare_parts=bare, outline_judged=judged,
                      off_water=elsewhere, blob_beyond=beyond, on_bare_water=bool(on_bare_water), body_gap=gap,
-                     photo_colours=colours, photo_colours_null=colours_null, body_relief=relief,
+                     photo_colours=colours, photo_colours_null=colours_null, body_relief=relief, body_purity=purity,
                      fails_on_parts=bool(but_parts and not passed))

@@ -50,7 +50,7 @@ from typing import Literal
 import numpy as np
 
 from photoservo.errors import InputError
-from photoservo.vision.appearance import stereo_grey, stereo_value
+from photoservo.vision.appearance import stereo_grey, stereo_saturation, stereo_value
 from photoservo.vision.bare_parts import stereo_water
 from photoservo.vision.candidates import (appearance_twin, grown_outlines, grown_turns, parted_turns, ranked, refined,
                                           same_surface_first, scaled_plane, stereo_depth, stereo_islands, stereo_tilt,
@@ -380,6 +380,8 @@ def acquisition(model: PhotoModel, left_bgr: np.ndarray, right_bgr: np.ndarray, 
                  foam=foam if p.foam_part_share < 1.0 else None)
     # the water's colour in each image, for detection's outline on another object (where hue bounds the target)
     looks["water"] = stereo_water(model, frame, looks["chroma"]) if frame.chroma is None else None
+    # ...and its saturation, for the body's colour against the photo's (where hue bounds the target)
+    looks["saturation_frame"] = stereo_saturation(left_bgr, right_bgr) if frame.chroma is None else None
     # ...and the pair's pixels on the photo's colours, for its inner points where the contour rule bounds the
     # target and those colours are a minority of the pair (vision/colour_cells.py)
     cells = (stereo_cells(left_bgr, right_bgr, model.colour_cells, fit_params.min_value)
@@ -426,7 +428,7 @@ def acquisition(model: PhotoModel, left_bgr: np.ndarray, right_bgr: np.ndarray, 
         search = dict(islands)[results[0][1].source]
         results[0] = yield from appearance_twin(results[0], search, looks["grey_frame"], p, seed, looks["value_frame"],
                                                 looks["parts"], looks["chroma"], looks["weight"], looks["foam"],
-                                                looks["cells"])
+                                                looks["cells"], looks["saturation_frame"])
     if p.outline_grow > 1.0 and results and not results[0][0].passed:  # after the twin: it draws from the islands' rng
         results = yield from grown_outlines(results, dict(islands), looks, p, seed)
     if p.parted_turns and results and not results[0][0].passed:  # after the grown outlines (own streams)
@@ -505,6 +507,7 @@ def _candidate_json(c: Candidate, d: Detection, model: PhotoModel) -> dict:
         "blob_beyond": round(d.blob_beyond, 4) if np.isfinite(d.blob_beyond) else None,
         "body_gap": round(d.body_gap, 2) if np.isfinite(d.body_gap) else None,
         "body_relief": round(d.body_relief, 4) if np.isfinite(d.body_relief) else None,
+        "body_purity": round(d.body_purity, 4) if np.isfinite(d.body_purity) else None,
         "confidence": round(d.confidence, 4),
         "source": c.source,
     }

@@ -19,7 +19,7 @@ import numpy as np
 
 from photoservo.errors import InputError
 from photoservo.vision.hs_cells import photo_cells
-from photoservo.vision.sampling import brightness, photo_values
+from photoservo.vision.sampling import brightness, photo_values, saturation
 
 HUE_BINS = 180
 NO_HUE = 255  # marks a pixel too grey or too dark to carry a hue
@@ -53,6 +53,7 @@ class PhotoModel:
     inner_value: (N_in,) float32 the photo's grey level at each inner point (the appearance cue,
         `vision/appearance.py`); empty for a model built without a photo (the cue is then off).
     inner_brightness: (N_in,) float32 the photo's brightness max(B, G, R) there (`appearance.body_layout`).
+    inner_saturation: (N_in,) float32 the photo's saturation (HSV's S, 0..255) there (`bare_parts.body_purity`).
     colour_cells: (15, 8) bool the photo's colours over hue and saturation (`hs_cells.photo_cells`);
         empty for a model built without a photo (detection's cue on them is then off).
     """
@@ -66,6 +67,7 @@ class PhotoModel:
     mask: np.ndarray
     inner_value: np.ndarray = field(default_factory=lambda: np.zeros(0, np.float32))
     inner_brightness: np.ndarray = field(default_factory=lambda: np.zeros(0, np.float32))
+    inner_saturation: np.ndarray = field(default_factory=lambda: np.zeros(0, np.float32))
     colour_cells: np.ndarray = field(default_factory=lambda: np.zeros((0, 0), bool))
 
     @cached_property
@@ -321,8 +323,8 @@ def build_photo_model(photo_bgr: np.ndarray, params: PhotoModelParams,
     `params.max_points` points the pitch is coarsened until they fit. `target_hues` marks the
     hues of the inner points and of every hue holding >= 1 % of the target's hued pixels,
     widened by `params.hue_tolerance`. `inner_value` holds the photo's grey at each inner point
-    (`sampling.photo_values`), `inner_brightness` its brightness, `colour_cells` the photo's colours
-    over hue and saturation (`hs_cells.photo_cells`).
+    (`sampling.photo_values`), `inner_brightness` its brightness, `inner_saturation` its saturation,
+    `colour_cells` the photo's colours over hue and saturation (`hs_cells.photo_cells`).
 
     Raises InputError when the photo is not a colour image, no target separates, or the target
     carries no hue (all grey/white/dark)."""
@@ -353,6 +355,7 @@ def build_photo_model(photo_bgr: np.ndarray, params: PhotoModelParams,
                       target_hues=lut, size_px=(float(w), float(h)), origin_px=origin, mask=mask,
                       inner_value=photo_values(photo_bgr, pin, interval),
                       inner_brightness=photo_values(photo_bgr, pin, interval, brightness),
+                      inner_saturation=photo_values(photo_bgr, pin, interval, saturation),
                       colour_cells=photo_cells(photo_bgr, mask, params.min_value))
 
 

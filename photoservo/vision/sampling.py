@@ -26,6 +26,12 @@ def brightness(bgr: np.ndarray) -> np.ndarray:
     return cv2.max(cv2.max(b, g), r).astype(np.float32)
 
 
+def saturation(bgr: np.ndarray) -> np.ndarray:
+    """float32 saturation S = 255 (max - min) / max of a BGR image (HSV's saturation, OpenCV 8-bit scale):
+    how pure its colour is, whatever its brightness (a gain of the light leaves it as it is)."""
+    return cv2.cvtColor(bgr, cv2.COLOR_BGR2HSV)[..., 1].astype(np.float32)
+
+
 def patches(img: np.ndarray, uv: np.ndarray, half: int) -> tuple[np.ndarray, np.ndarray]:
     """Bilinearly sampled grey patches (..., k, k), k = 2 half + 1, centred on sub-pixel positions
     uv (..., 2); `ok` where the whole patch lies inside the image."""
