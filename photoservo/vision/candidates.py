@@ -21,7 +21,7 @@ import numpy as np
 from photoservo.vision.appearance import StereoGrey, appearance
 from photoservo.vision.contour import StereoChroma
 from photoservo.vision.colour_cells import StereoCells
-from photoservo.vision.detection import MAX_OFF_WATER, MIN_JUDGED_SHARE, Detection, detect
+from photoservo.vision.detection import MAX_BODY_PURITY, MAX_OFF_WATER, MIN_JUDGED_SHARE, Detection, detect
 from photoservo.vision.fitness import StereoHue, fitness, point_weight
 from photoservo.vision.parts import absent_parts
 from photoservo.vision.photo_model import PhotoModel
@@ -585,10 +585,13 @@ def ranked(results: list[tuple[Detection, Candidate]], passed_ratio: float) -> l
     fit whose absent parts lie on the water's own colour (`Detection.on_bare_water`) is another
     object under the model, not the creature with a test failed, and sets no bar (renderer
     held-out 2 1207: a squid's model on a look-alike standing 0.56, two arm parts on bare
-    water, above the creature's fit 1.0 % off at 0.33)."""
+    water, above the creature's fit 1.0 % off at 0.33). Nor does a fit whose body is purer in colour
+    than the photo (`Detection.body_purity` over `MAX_BODY_PURITY`): another species under the model
+    (harbour 1003: a squid's model on a crab standing 0.72, 1.45, above the creature's fits 2.4-4.5 % off)."""
     out = sorted(results, key=lambda dc: (-dc[0].standing, -dc[1].fitness))
     if out and not out[0][0].passed and out[0][0].standing > 0:
-        bar = max((d.standing for d, _ in out if not d.passed and not d.on_bare_water), default=0.0)
+        bar = max((d.standing for d, _ in out
+                   if not d.passed and not d.on_bare_water and not d.body_purity > MAX_BODY_PURITY), default=0.0)
         for k, (d, _) in enumerate(out):
             if d.passed and d.standing >= passed_ratio * bar:
                 out.insert(0, out.pop(k))
