@@ -189,19 +189,9 @@ def body_relief(R: np.ndarray, t: np.ndarray, alpha: float, model: PhotoModel, f
     (harbour held-out 2 null 1861, held-out 5 null 2266: 0.40, 0.46) varies less than half as much
     as the photo's mottled body; a creature, shaded by the light and blurred, 0.88 or more (the tuned
     answers, both generators)."""
-    if len(model.inner_brightness) != len(model.inner_uv):
-        return np.full(2, np.nan)
-    p = project_model(R, t, alpha, model, rig)
-    target = target_hue_lut(model.target_hues)
-    photo = model.inner_brightness.astype(np.float64)
     out = np.full(2, np.nan)
-    for k, (uv_in, hue, value) in enumerate(((p.inner_left[0], frame.left, value_frame.left),
-                                             (p.inner_right[0], frame.right, value_frame.right))):
-        ri, ci, inside = nearest_pixel(uv_in, hue.shape)
-        body = inside & target[np.where(inside, hue[ri, ci], HUE_BINS)]
-        if body.sum() < MIN_BODY:
-            continue
-        v, pv = value[ri[body], ci[body]].astype(np.float64), photo[body]
+    for k, pv, value in _body_samples(R, t, alpha, model, model.inner_brightness, frame, value_frame, rig):
+        v = value.astype(np.float64)
         if v.mean() > 0 and pv.mean() > 0 and pv.std() > 0:
             out[k] = float((v.std() / v.mean()) / (pv.std() / pv.mean()))
     return out
@@ -219,21 +209,30 @@ def body_purity(R: np.ndarray, t: np.ndarray, alpha: float, model: PhotoModel, f
     look-alike of another species in a purer colour of the creature's hue reads more (renderer held-out
     6 nulls 2431, 2467 and held-out 4 null 2023: the orange crab under the pale squid's model, 1.37-1.42;
     harbour held-out 7 null 2605, a crab under a squid's model, 1.39)."""
-    if len(model.inner_saturation) != len(model.inner_uv):
-        return np.full(2, np.nan)
+    out = np.full(2, np.nan)
+    for k, ps, sat in _body_samples(R, t, alpha, model, model.inner_saturation, frame, saturation_frame, rig):
+        if np.median(ps) > 0:
+            out[k] = float(np.median(sat)) / float(np.median(ps))
+    return out
+
+
+def _body_samples(R: np.ndarray, t: np.ndarray, alpha: float, model: PhotoModel, photo: np.ndarray,
+                  frame: StereoHue, planes: StereoGrey, rig: Rig) -> list[tuple[int, np.ndarray, np.ndarray]]:
+    """ONE pose's body as `body_relief` and `body_purity` read it: per camera k (0 left, 1 right) with at
+    least `MIN_BODY` inner points on a target hue (nearest pixel, as the fitness reads), (k, the photo's
+    per-point values `photo` (N_in,) there as float64, `planes`' values at them); none when the model
+    carries no such values (a model built without a photo)."""
+    if len(photo) != len(model.inner_uv):
+        return []
     p = project_model(R, t, alpha, model, rig)
     target = target_hue_lut(model.target_hues)
-    photo = model.inner_saturation.astype(np.float64)
-    out = np.full(2, np.nan)
-    for k, (uv_in, hue, sat) in enumerate(((p.inner_left[0], frame.left, saturation_frame.left),
-                                           (p.inner_right[0], frame.right, saturation_frame.right))):
+    out = []
+    for k, (uv_in, hue, plane) in enumerate(((p.inner_left[0], frame.left, planes.left),
+                                             (p.inner_right[0], frame.right, planes.right))):
         ri, ci, inside = nearest_pixel(uv_in, hue.shape)
         body = inside & target[np.where(inside, hue[ri, ci], HUE_BINS)]
-        if body.sum() < MIN_BODY:
-            continue
-        ps = float(np.median(photo[body]))
-        if ps > 0:
-            out[k] = float(np.median(sat[ri[body], ci[body]])) / ps
+        if body.sum() >= MIN_BODY:
+            out.append((k, np.asarray(photo, np.float64)[body], plane[ri[body], ci[body]]))
     return out
 
 
