@@ -303,7 +303,8 @@ def _unpack_model(data: bytes) -> Any:
     kwargs = {}
     for f in dataclasses.fields(PhotoModel):
         if f.name not in npz.files:
-            warnings.warn(f"recorded photo-model lacks field '{f.name}'; model not rebuilt", stacklevel=3)
+            warnings.warn(f"recorded photo-model lacks field '{f.name}' (recorded before it existed); model not "
+                          "unpacked (replay rebuilds it from the recorded photo)", stacklevel=3)
             return None
         v = npz[f.name]
         if str(f.type).startswith("tuple"):

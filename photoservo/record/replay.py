@@ -148,7 +148,8 @@ def tracker_seed(rec: Recording) -> int:
 def load_replay(path: str | Path, config_path: str | Path | None = None, overrides: Sequence[str] = (),
                 fixed_generations: bool = False, allow_partial: bool = False) -> ReplaySetup:
     """Read a recording and rebuild rig, photo-model, config and seed for `replay`. Changed
-    photo-model keys rebuild the model from the recorded photo; they and the hue keys need a
+    photo-model keys rebuild the model from the recorded photo, as does a recorded model that lacks
+    a field (recorded before the field existed); changed photo-model and hue keys need a
     recording with full frames (`record.planes`)."""
     p = Path(path)
     rec = read_checked(p, allow_partial)
@@ -156,8 +157,8 @@ def load_replay(path: str | Path, config_path: str | Path | None = None, overrid
     rig = rec.setup.rig()
     if rig is None or rig.T_flange_left() is None:
         raise InputError(f"{p}: the recording has no rig with a hand-eye transform: nothing to replay")
-    if rec.setup.model is None:
-        raise InputError(f"{p}: the recording has no photo-model: nothing to replay")
+    if rec.setup.model is None and rec.setup.photo_bgr is None:
+        raise InputError(f"{p}: the recording has no photo-model and no photo: nothing to replay")
     if not rec.frames:
         raise InputError(f"{p}: the recording holds no frames")
     changed = _changed_frame_keys(rec_cfg, cfg)
@@ -168,7 +169,9 @@ def load_replay(path: str | Path, config_path: str | Path | None = None, overrid
         raise InputError(f"{p}: a {rec.setup.run.get('mode')} recording has no full frames to write: "
                          "recording.mode cannot be \"full\" for its replay")
     model = rec.setup.model
-    if cfg.photo_model != rec_cfg.photo_model:
+    # a recording made before the photo-model gained a field (the reader leaves its model None) gets
+    # the model rebuilt from its recorded photo, as changed photo-model keys do
+    if model is None or cfg.photo_model != rec_cfg.photo_model:
         from photoservo.vision.photo_model import build_photo_model
         model = build_photo_model(rec.setup.photo_bgr, cfg.photo_model)
     budgeted = not rec_cfg.sim.lockstep
