@@ -12,6 +12,7 @@ import cv2
 import numpy as np
 import pytest
 
+from _bench_scenes import found_within_5
 from photoservo.config import load_config
 from photoservo.sim import harbour
 from photoservo.sim.scenes import EFFECTS, random_scene
@@ -117,20 +118,11 @@ def test_a_part_one_camera_sees_does_not_excuse_a_look_alike(seed, distractor):
     assert not est.found
 
 
-def _found_within_5(sc, model, seed, p=P):
-    """The estimate with the benchmark's seed, found within 5 % of the distance."""
-    est = estimate(model, sc.left, sc.right, sc.rig, CFG.ga, p, CFG.fitness, seed=seed)
-    assert est.found
-    truth = np.array(sc.truth["position_mm"])
-    assert np.linalg.norm(np.array(est.position_mm) - truth) / truth[2] < 0.05
-    return est
-
-
 def test_a_squid_whose_thin_arms_blur_into_the_water_keeps_them():
     # harbour 1018 (same photo, split by foam): two arm parts absent, their pixels half way from the
     # water's colour to the body's; found as before
     sc, model = _harbour(1018, kind="squid", foam_split=True)
-    est = _found_within_5(sc, model, seed=18)
+    est = found_within_5(sc, model, seed=18)
     c = _pose(est.candidates[0])
     frame, grey, chroma = _looks(sc)
     labels = model_parts(model.inner_uv)
@@ -148,7 +140,7 @@ def test_another_individuals_squid_with_the_photos_layout_keeps_an_arm_on_bare_w
     # brightness layout is the photo's by both appearance cues (a float of one hue has none to show):
     # found. With the layout not counted (min_appearance above every cue) the rule rejects it
     sc, model = _harbour(1453, kind="squid", other_photo=True)
-    est = _found_within_5(sc, model, seed=453)
+    est = found_within_5(sc, model, seed=453)
     first = est.candidates[0]
     assert first["absent_parts"] == pytest.approx(2 / 12, abs=1e-3) and first["bare_parts"] >= 1
     assert min(first["appearance"], first["body_layout"]) >= P.min_appearance
