@@ -17,7 +17,7 @@ from photoservo.config import load_config
 from photoservo.sim import harbour
 from photoservo.sim.scenes import EFFECTS, random_scene
 from photoservo.vision.appearance import stereo_grey
-from photoservo.vision.bare_parts import bare_flags, bare_parts
+from photoservo.vision.bare_parts import bare_counts, bare_flags
 from photoservo.vision.contour import stereo_chroma
 from photoservo.vision.estimator import estimate
 from photoservo.vision.fitness import inner_hues, project_model, stereo_hue
@@ -86,7 +86,7 @@ def test_parts_painted_over_with_the_water_are_bare_and_blurred_arms_are_not():
     absent, bare = bare_flags(R, t, alpha, model, frame, grey, chroma, sc.rig, labels)
     assert absent[:, body].all() and bare[body].all()
     assert not bare[arms].any()
-    n_absent, n_bare = bare_parts(R, t, alpha, model, frame, grey, chroma, sc.rig, labels)
+    n_absent, n_bare, _ = bare_counts(R, t, alpha, model, frame, grey, chroma, sc.rig, labels)
     assert n_absent == arms.sum() + 2 and n_bare == 2
 
 
@@ -126,7 +126,8 @@ def test_a_squid_whose_thin_arms_blur_into_the_water_keeps_them():
     c = _pose(est.candidates[0])
     frame, grey, chroma = _looks(sc)
     labels = model_parts(model.inner_uv)
-    n_absent, bare = bare_parts(c.R_model, c.position_mm, c.alpha, model, frame, grey, chroma, sc.rig, labels)
+    n_absent, bare, _ = bare_counts(c.R_model, c.position_mm, c.alpha, model, frame, grey, chroma, sc.rig,
+                                    labels)
     assert n_absent == 2 and bare == 0
     # the absent parts land off the target's hues in at least one camera: the check judged them
     h = inner_hues(c.R_model, c.position_mm, c.alpha, model, frame, sc.rig)

@@ -118,20 +118,13 @@ def camera_bare_flags(R: np.ndarray, t: np.ndarray, alpha: float, model: PhotoMo
     return absent, bare
 
 
-def bare_parts(R: np.ndarray, t: np.ndarray, alpha: float, model: PhotoModel, frame: StereoHue,
-               grey_frame: StereoGrey, chroma: StereoChroma, rig: Rig, labels: np.ndarray,
-               z: float = BARE_Z, foam_share: float = 1.0) -> tuple[int, int]:
-    """(absent, bare): the worse camera's count of absent parts and how many parts lie on bare
-    water in both cameras (`bare_flags`)."""
-    return bare_counts(R, t, alpha, model, frame, grey_frame, chroma, rig, labels, z, foam_share)[:2]
-
-
 def bare_counts(R: np.ndarray, t: np.ndarray, alpha: float, model: PhotoModel, frame: StereoHue,
                 grey_frame: StereoGrey, chroma: StereoChroma, rig: Rig, labels: np.ndarray,
                 z: float = BARE_Z, foam_share: float = 1.0) -> tuple[int, int, int]:
-    """(absent, bare, bare_any): `bare_parts`, and how many parts lie on bare water in at least one
-    camera that misses them (`camera_bare_flags`): 0 when every absent part leaves a trace of the
-    body's colour wherever it is absent."""
+    """(absent, bare, bare_any): the worse camera's count of absent parts, how many parts lie on bare
+    water in both cameras (`bare_flags`), and how many lie on bare water in at least one camera that
+    misses them (`camera_bare_flags`): 0 when every absent part leaves a trace of the body's colour
+    wherever it is absent."""
     absent, bare = camera_bare_flags(R, t, alpha, model, frame, grey_frame, chroma, rig, labels, z, foam_share)
     return (int(absent.sum(axis=1).max()) if absent.size else 0, int((bare[0] & bare[1]).sum()),
             int((bare[0] | bare[1]).sum()))
