@@ -148,3 +148,31 @@ def test_another_individuals_squid_with_the_photos_layout_keeps_an_arm_on_bare_w
     blind = estimate(model, sc.left, sc.right, sc.rig, CFG.ga, dataclasses.replace(P, min_appearance=1.01),
                      CFG.fitness, seed=453)
     assert not blind.found
+
+
+def test_the_rules_read_the_same_on_the_projection_detection_passes():
+    # detection projects a candidate once (fitness.project_model) for the parts check and every rule of
+    # vision/bare_parts.py; each rule given that projection reads exactly what it reads projecting the pose
+    # itself (renderer 1000, a squid at its true pose and 8 % nearer)
+    from photoservo.vision.appearance import stereo_saturation, stereo_value
+    from photoservo.vision.bare_parts import body_gap, body_purity, body_relief, off_water
+    from photoservo.vision.parts import absent_parts
+
+    sc = random_scene(1000, CFG.synthetic, CFG.photo_model, kind="squid", effects=EFFECTS)
+    model = build_photo_model(sc.photo, CFG.photo_model)
+    frame, grey, chroma = _looks(sc)
+    value, sat = stereo_value(sc.left, sc.right), stereo_saturation(sc.left, sc.right)
+    labels = model_parts(model.inner_uv)
+    tr = sc.truth
+    R, alpha = np.array(tr["rotation"]), tr["alpha_px_per_mm"]
+    for t in (np.array(tr["position_mm"]), 0.92 * np.array(tr["position_mm"])):
+        proj = project_model(R, t, alpha, model, sc.rig)
+        pose = (R, t, alpha, model, frame)
+        assert bare_counts(*pose, grey, chroma, sc.rig, labels, proj=proj) == bare_counts(*pose, grey, chroma, sc.rig, labels)
+        for got, own in ((off_water(*pose, chroma, sc.rig, CFG.fitness.contour_chroma, proj=proj),
+                          off_water(*pose, chroma, sc.rig, CFG.fitness.contour_chroma)),
+                         (body_gap(*pose, chroma, sc.rig, proj), body_gap(*pose, chroma, sc.rig)),
+                         (body_relief(*pose, value, sc.rig, proj), body_relief(*pose, value, sc.rig)),
+                         (body_purity(*pose, sat, sc.rig, proj), body_purity(*pose, sat, sc.rig)),
+                         (absent_parts(*pose, sc.rig, labels, proj=proj), absent_parts(*pose, sc.rig, labels))):
+            assert np.array_equal(got, own, equal_nan=True)

@@ -35,7 +35,8 @@ with one bare a model wider than what lies under it.
 
 Frames: poses as in `fitness` (R the model's linear map, t mm in the left camera frame, alpha
 px/mm); images: the pair's hue (`StereoHue`), grey (`appearance.StereoGrey`) and a*b* chroma
-(`contour.StereoChroma`).
+(`contour.StereoChroma`). Each rule reads ONE pose's points in both cameras; `proj`, where given, is that
+pose's `fitness.project_model` (detection projects a candidate once for all of them), else it is computed.
 """
 
 from __future__ import annotations
@@ -44,7 +45,7 @@ import numpy as np
 
 from photoservo.vision.appearance import StereoGrey
 from photoservo.vision.contour import StereoChroma
-from photoservo.vision.fitness import StereoHue, nearest_pixel, project_model
+from photoservo.vision.fitness import ModelProjection, StereoHue, nearest_pixel, project_model
 from photoservo.vision.parts import FOAM, absent_flags, under_foam
 from photoservo.vision.photo_model import HUE_BINS, PhotoModel, target_hue_lut
 from photoservo.vision.rig import Rig
@@ -71,21 +72,23 @@ def _colours(uv: np.ndarray, grey: np.ndarray, ab: np.ndarray, hue: np.ndarray
 
 def bare_flags(R: np.ndarray, t: np.ndarray, alpha: float, model: PhotoModel, frame: StereoHue,
                grey_frame: StereoGrey, chroma: StereoChroma, rig: Rig, labels: np.ndarray,
-               z: float = BARE_Z, foam_share: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
+               z: float = BARE_Z, foam_share: float = 1.0, proj: ModelProjection | None = None
+               ) -> tuple[np.ndarray, np.ndarray]:
     """One pose's parts (module docstring): (absent (2, n_parts) bool per camera, as the parts
     check counts them, `foam_share` as there (`parts.absent_flags`); bare (n_parts,) bool, absent
     on bare water in both cameras). `labels`:
     `parts.model_parts` of the model."""
-    absent, bare = camera_bare_flags(R, t, alpha, model, frame, grey_frame, chroma, rig, labels, z, foam_share)
+    absent, bare = camera_bare_flags(R, t, alpha, model, frame, grey_frame, chroma, rig, labels, z, foam_share, proj)
     return absent, bare[0] & bare[1]
 
 
 def camera_bare_flags(R: np.ndarray, t: np.ndarray, alpha: float, model: PhotoModel, frame: StereoHue,
                       grey_frame: StereoGrey, chroma: StereoChroma, rig: Rig, labels: np.ndarray,
-                      z: float = BARE_Z, foam_share: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
+                      z: float = BARE_Z, foam_share: float = 1.0, proj: ModelProjection | None = None
+                      ) -> tuple[np.ndarray, np.ndarray]:
     """`bare_flags` per camera: (absent (2, n_parts), bare (2, n_parts): absent in that camera and on
     bare water there)."""
-    p = project_model(R, t, alpha, model, rig)
+    p = project_model(R, t, alpha, model, rig) if proj is None else proj
     n = int(labels.max()) + 1 if len(labels) else 0
     target = target_hue_lut(model.target_hues)
     absent = np.zeros((2, n), bool)
@@ -120,12 +123,13 @@ def camera_bare_flags(R: np.ndarray, t: np.ndarray, alpha: float, model: PhotoMo
 
 def bare_counts(R: np.ndarray, t: np.ndarray, alpha: float, model: PhotoModel, frame: StereoHue,
                 grey_frame: StereoGrey, chroma: StereoChroma, rig: Rig, labels: np.ndarray,
-                z: float = BARE_Z, foam_share: float = 1.0) -> tuple[int, int, int]:
+                z: float = BARE_Z, foam_share: float = 1.0, proj: ModelProjection | None = None
+                ) -> tuple[int, int, int]:
     """(absent, bare, bare_any): the worse camera's count of absent parts, how many parts lie on bare
     water in both cameras (`bare_flags`), and how many lie on bare water in at least one camera that
     misses them (`camera_bare_flags`): 0 when every absent part leaves a trace of the body's colour
     wherever it is absent."""
-    absent, bare = camera_bare_flags(R, t, alpha, model, frame, grey_frame, chroma, rig, labels, z, foam_share)
+    absent, bare = camera_bare_flags(R, t, alpha, model, frame, grey_frame, chroma, rig, labels, z, foam_share, proj)
     return (int(absent.sum(axis=1).max()) if absent.size else 0, int((bare[0] & bare[1]).sum()),
             int((bare[0] | bare[1]).sum()))
 
@@ -145,7 +149,7 @@ def stereo_water(model: PhotoModel, frame: StereoHue, chroma: StereoChroma) -> n
 
 
 def body_gap(R: np.ndarray, t: np.ndarray, alpha: float, model: PhotoModel, frame: StereoHue,
-             chroma: StereoChroma, rig: Rig) -> np.ndarray:
+             chroma: StereoChroma, rig: Rig, proj: ModelProjection | None = None) -> np.ndarray:
     """(2,) per camera, a*b* units (OpenCV 8-bit L*a*b*): how far ONE pose's body stands off the water
     around it — the distance between the median a*b* at its inner points S_in on a target hue (the
     body) and at its outer points S_out on hue off the target's hues (the water beside the model, as
@@ -155,7 +159,7 @@ def body_gap(R: np.ndarray, t: np.ndarray, alpha: float, model: PhotoModel, fram
     angle across the target's hue tolerance, so a body on target hue a few a*b* units off the water
     (harbour held-out 5 null 2266: a dull leaf under a squid's model, 9.8 and 11.4) is a colour the
     water nearly has, not a creature's (tuned harbour answers 23-55)."""
-    p = project_model(R, t, alpha, model, rig)
+    p = project_model(R, t, alpha, model, rig) if proj is None else proj
     target = target_hue_lut(model.target_hues)
     out = np.full(2, np.nan)
     for k, (uv_in, uv_out, hue, ab) in enumerate(((p.inner_left[0], p.outer_left[0], frame.left, chroma.left),
@@ -172,7 +176,7 @@ def body_gap(R: np.ndarray, t: np.ndarray, alpha: float, model: PhotoModel, fram
 
 
 def body_relief(R: np.ndarray, t: np.ndarray, alpha: float, model: PhotoModel, frame: StereoHue,
-                value_frame: StereoGrey, rig: Rig) -> np.ndarray:
+                value_frame: StereoGrey, rig: Rig, proj: ModelProjection | None = None) -> np.ndarray:
     """(2,) per camera: how much ONE pose's body (inner points on a target hue) varies in brightness
     against the photo at the same points — the coefficient of variation of the image's brightness
     (`value_frame`, `appearance.stereo_value`) over the body points, over that of the photo's
@@ -183,7 +187,7 @@ def body_relief(R: np.ndarray, t: np.ndarray, alpha: float, model: PhotoModel, f
     as the photo's mottled body; a creature, shaded by the light and blurred, 0.88 or more (the tuned
     answers, both generators)."""
     out = np.full(2, np.nan)
-    for k, pv, value in _body_samples(R, t, alpha, model, model.inner_brightness, frame, value_frame, rig):
+    for k, pv, value in _body_samples(R, t, alpha, model, model.inner_brightness, frame, value_frame, rig, proj):
         v = value.astype(np.float64)
         if v.mean() > 0 and pv.mean() > 0 and pv.std() > 0:
             out[k] = float((v.std() / v.mean()) / (pv.std() / pv.mean()))
@@ -191,7 +195,7 @@ def body_relief(R: np.ndarray, t: np.ndarray, alpha: float, model: PhotoModel, f
 
 
 def body_purity(R: np.ndarray, t: np.ndarray, alpha: float, model: PhotoModel, frame: StereoHue,
-                saturation_frame: StereoGrey, rig: Rig) -> np.ndarray:
+                saturation_frame: StereoGrey, rig: Rig, proj: ModelProjection | None = None) -> np.ndarray:
     """(2,) per camera: how much purer ONE pose's body (inner points on a target hue) is in colour than
     the photo at the same points — the median saturation of the image there (`saturation_frame`,
     `appearance.stereo_saturation`) over the photo's median (`model.inner_saturation`); nan in a camera
@@ -203,21 +207,22 @@ def body_purity(R: np.ndarray, t: np.ndarray, alpha: float, model: PhotoModel, f
     6 nulls 2431, 2467 and held-out 4 null 2023: the orange crab under the pale squid's model, 1.37-1.42;
     harbour held-out 7 null 2605, a crab under a squid's model, 1.39)."""
     out = np.full(2, np.nan)
-    for k, ps, sat in _body_samples(R, t, alpha, model, model.inner_saturation, frame, saturation_frame, rig):
+    for k, ps, sat in _body_samples(R, t, alpha, model, model.inner_saturation, frame, saturation_frame, rig, proj):
         if np.median(ps) > 0:
             out[k] = float(np.median(sat)) / float(np.median(ps))
     return out
 
 
 def _body_samples(R: np.ndarray, t: np.ndarray, alpha: float, model: PhotoModel, photo: np.ndarray,
-                  frame: StereoHue, planes: StereoGrey, rig: Rig) -> list[tuple[int, np.ndarray, np.ndarray]]:
+                  frame: StereoHue, planes: StereoGrey, rig: Rig, proj: ModelProjection | None = None
+                  ) -> list[tuple[int, np.ndarray, np.ndarray]]:
     """ONE pose's body as `body_relief` and `body_purity` read it: per camera k (0 left, 1 right) with at
     least `MIN_BODY` inner points on a target hue (nearest pixel, as the fitness reads), (k, the photo's
     per-point values `photo` (N_in,) there as float64, `planes`' values at them); none when the model
     carries no such values (a model built without a photo)."""
     if len(photo) != len(model.inner_uv):
         return []
-    p = project_model(R, t, alpha, model, rig)
+    p = project_model(R, t, alpha, model, rig) if proj is None else proj
     target = target_hue_lut(model.target_hues)
     out = []
     for k, (uv_in, hue, plane) in enumerate(((p.inner_left[0], frame.left, planes.left),
@@ -236,14 +241,15 @@ def _chroma(uv: np.ndarray, hue: np.ndarray, ab: np.ndarray) -> tuple[np.ndarray
 
 
 def off_water(R: np.ndarray, t: np.ndarray, alpha: float, model: PhotoModel, frame: StereoHue,
-              chroma: StereoChroma, rig: Rig, edge: float, water: np.ndarray | None = None) -> np.ndarray:
+              chroma: StereoChroma, rig: Rig, edge: float, water: np.ndarray | None = None,
+              proj: ModelProjection | None = None) -> np.ndarray:
     """(2,) per camera: the share of ONE pose's outer points S_out that land on hue, off the target's
     hues, and more than `edge` a*b* units (a colour edge: `[fitness] contour_chroma`) from the
     image's water colour (`water_chroma`): on another object, not on the water. A model shrunk
     inside a larger object of another kind (renderer null 1849: a squid's model on a fish's brown
     band) has its outline there; a creature's lies on water, foam or glints (no hue). `water`: the
     pair's `stereo_water` (computed when None)."""
-    p = project_model(R, t, alpha, model, rig)
+    p = project_model(R, t, alpha, model, rig) if proj is None else proj
     target = target_hue_lut(model.target_hues)
     water = stereo_water(model, frame, chroma) if water is None else water
     out = np.zeros(2)

@@ -189,6 +189,7 @@ from photoservo.vision.fitness import (
     counts_compiled,
     counts_reference,
     fitness,
+    project_model,
 )
 from photoservo.vision.footprint import blob_beyond
 from photoservo.vision.parts import absent_parts, model_parts
@@ -564,29 +565,31 @@ def detect(c: Candidate, model: PhotoModel, frame: StereoHue, rig: Rig, fit_para
         beyond = float(np.min(blob_beyond(c.R_model, c.position_mm, c.alpha, model, frame, rig)))
         excused = not beyond > MAX_BLOB_BEYOND
     parts_frame = frame if foam is None else foam  # a part straddling foam is not judged (vision/parts.py)
-    absent = absent_parts(c.R_model, c.position_mm, c.alpha, model, parts_frame, rig, parts, p.foam_part_share)
+    # the candidate's points in both cameras, projected once for the parts check and the rules below that read them
+    proj = project_model(c.R_model, c.position_mm, c.alpha, model, rig)
+    absent = absent_parts(c.R_model, c.position_mm, c.alpha, model, parts_frame, rig, parts, p.foam_part_share, proj)
     n_absent, bare, bare_any = 0, 0, -1  # parts on bare water (module docstring), from the pair's grey and chroma
     if p.bare_water_z > 0 and grey_frame is not None and chroma is not None:
         n_absent, bare, bare_any = bare_counts(c.R_model, c.position_mm, c.alpha, model, parts_frame, grey_frame, chroma, rig,
                                     model_parts(model.inner_uv) if parts is None else parts, p.bare_water_z,
-                                    p.foam_part_share)
+                                    p.foam_part_share, proj)
     # where the contour rule bounds the target: how much of the outline it could judge (module docstring)
     judged = (float(judged_share(c.R_model, c.position_mm, c.alpha, model, frame, frame.chroma, rig, fit_params).min())
               if frame.chroma is not None else math.nan)
     # where hue bounds the target: how much of the outline lies on another object (module docstring)
     elsewhere = (float(off_water(c.R_model, c.position_mm, c.alpha, model, frame, chroma, rig,
-                                 fit_params.contour_chroma, water).min()) if frame.chroma is None and chroma is not None
+                                 fit_params.contour_chroma, water, proj).min()) if frame.chroma is None and chroma is not None
                  else math.nan)
     # where hue bounds the target: how far the body stands off the water beside it, the larger camera (module docstring)
-    gap = (float(np.max(body_gap(c.R_model, c.position_mm, c.alpha, model, frame, chroma, rig)))
+    gap = (float(np.max(body_gap(c.R_model, c.position_mm, c.alpha, model, frame, chroma, rig, proj)))
            if frame.chroma is None and chroma is not None else math.nan)
     relief = math.nan  # where hue bounds the target: the body's brightness varies as the photo's (module docstring)
     if frame.chroma is None and value_frame is not None:
-        ratios = body_relief(c.R_model, c.position_mm, c.alpha, model, frame, value_frame, rig)
+        ratios = body_relief(c.R_model, c.position_mm, c.alpha, model, frame, value_frame, rig, proj)
         relief = float(np.max(ratios[np.isfinite(ratios)])) if np.isfinite(ratios).any() else math.nan
     purity = math.nan  # where hue bounds the target: the body's colour no purer than the photo's (module docstring)
     if frame.chroma is None and saturation_frame is not None:
-        ratios = body_purity(c.R_model, c.position_mm, c.alpha, model, frame, saturation_frame, rig)
+        ratios = body_purity(c.R_model, c.position_mm, c.alpha, model, frame, saturation_frame, rig, proj)
         purity = float(np.min(ratios[np.isfinite(ratios)])) if np.isfinite(ratios).any() else math.nan
     on_bare_water = n_absent >= 2 and bare >= 1 and not (bare == 1 and layout)
     # where the contour rule bounds the target: the inner points on the photo's colours (module docstring)

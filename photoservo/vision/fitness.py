@@ -204,12 +204,12 @@ def _sample(uv: np.ndarray, hue: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 def inner_hues(R: np.ndarray, t: np.ndarray, alpha: float, model: PhotoModel, frame: StereoHue,
-               rig: Rig) -> np.ndarray:
+               rig: Rig, proj: ModelProjection | None = None) -> np.ndarray:
     """The image hue under each inner point S_in of ONE pose, as the fitness reads it (nearest
     pixel): (2, N_in) int16, rows left and right camera, NO_HUE where the pixel carries no hue or
     the point falls outside the image. R (3, 3) the model's linear map, t (3,) mm in the left
-    camera frame, alpha px/mm."""
-    p = project_model(R, t, alpha, model, rig)
+    camera frame, alpha px/mm; `proj`: that pose's `project_model` (computed when None)."""
+    p = project_model(R, t, alpha, model, rig) if proj is None else proj
     rows = []
     for uv, hue in ((p.inner_left, frame.left), (p.inner_right, frame.right)):
         h, inside = _sample(uv, hue)

@@ -62,7 +62,7 @@ import math
 import cv2
 import numpy as np
 
-from photoservo.vision.fitness import StereoHue, inner_hues
+from photoservo.vision.fitness import ModelProjection, StereoHue, inner_hues
 from photoservo.vision.photo_model import HUE_BINS, NO_HUE, PhotoModel, target_hue_lut
 from photoservo.vision.rig import Rig
 
@@ -160,12 +160,14 @@ def absent_share(hued: np.ndarray, on_target: np.ndarray, labels: np.ndarray,
 
 
 def absent_parts(R: np.ndarray, t: np.ndarray, alpha: float, model: PhotoModel, frame: StereoHue, rig: Rig,
-                 labels: np.ndarray | None = None, foam_share: float = 1.0) -> float:
+                 labels: np.ndarray | None = None, foam_share: float = 1.0, proj: ModelProjection | None = None
+                 ) -> float:
     """`absent_share` of one pose: R (3, 3) the model's linear map (`Candidate.R_model`), t (3,)
     mm in the left camera frame, alpha px/mm; `labels` from `model_parts` (computed when None);
     with `frame` from `foam_marked`, a part with at least `foam_share` of its points on foam is
-    not judged (module docstring; 1: every part is)."""
-    h = inner_hues(R, t, alpha, model, frame, rig)
+    not judged (module docstring; 1: every part is); `proj`: the pose's `fitness.project_model` (computed
+    when None)."""
+    h = inner_hues(R, t, alpha, model, frame, rig, proj)
     hued = h < HUE_BINS
     return absent_share(hued, target_hue_lut(model.target_hues)[h], model_parts(model.inner_uv) if labels is None else labels, h == FOAM, foam_share)
 
