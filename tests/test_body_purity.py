@@ -66,3 +66,16 @@ def test_a_fit_on_a_purer_look_alike_sets_no_bar_for_the_creature():
     assert est.found and off(est, sc) < 0.05
     purer = [c for c in est.candidates if c["body_purity"] is not None and c["body_purity"] > detection.MAX_BODY_PURITY]
     assert purer and max(c["standing"] for c in purer) > est.candidates[0]["standing"]
+
+
+def test_the_saturation_the_hue_carries_is_the_pairs():
+    # estimate() converts the pair to HSV once (stereo_hue(saturation=True)): the same hue as without, and the
+    # saturation detection reads (stereo_saturation from StereoHue.saturation) equal to the pair's own
+    sc, _ = renderer_scene(1037, kind="crab", other_photo=True)
+    plain, both = stereo_hue(sc.left, sc.right, CFG.fitness), stereo_hue(sc.left, sc.right, CFG.fitness, saturation=True)
+    assert plain.saturation is None
+    assert np.array_equal(both.left, plain.left) and np.array_equal(both.right, plain.right)
+    assert both.left.flags["C_CONTIGUOUS"] and both.right.flags["C_CONTIGUOUS"]
+    own, carried = stereo_saturation(sc.left, sc.right), stereo_saturation(sc.left, sc.right, both.saturation)
+    for a, b in ((own.left, carried.left), (own.right, carried.right)):
+        assert a.dtype == b.dtype == np.float32 and np.array_equal(a, b)

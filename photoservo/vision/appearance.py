@@ -73,8 +73,12 @@ def stereo_value(left_bgr: np.ndarray, right_bgr: np.ndarray) -> StereoGrey:
     return StereoGrey(left=brightness(left_bgr), right=brightness(right_bgr))
 
 
-def stereo_saturation(left_bgr: np.ndarray, right_bgr: np.ndarray) -> StereoGrey:
-    """Saturation images (`sampling.saturation`) of a stereo pair (BGR uint8) for `bare_parts.body_purity`."""
+def stereo_saturation(left_bgr: np.ndarray, right_bgr: np.ndarray,
+                      planes: tuple[np.ndarray, np.ndarray] | None = None) -> StereoGrey:
+    """Saturation images (`sampling.saturation`) of a stereo pair (BGR uint8) for `bare_parts.body_purity`;
+    from `planes`, the pair's uint8 saturation where its hue was computed with it (`StereoHue.saturation`)."""
+    if planes is not None:
+        return StereoGrey(left=planes[0].astype(np.float32), right=planes[1].astype(np.float32))
     return StereoGrey(left=saturation(left_bgr), right=saturation(right_bgr))
 
 

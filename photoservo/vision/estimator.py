@@ -381,7 +381,8 @@ def acquisition(model: PhotoModel, left_bgr: np.ndarray, right_bgr: np.ndarray, 
     # the water's colour in each image, for detection's outline on another object (where hue bounds the target)
     looks["water"] = stereo_water(model, frame, looks["chroma"]) if frame.chroma is None else None
     # ...and its saturation, for the body's colour against the photo's (where hue bounds the target)
-    looks["saturation_frame"] = stereo_saturation(left_bgr, right_bgr) if frame.chroma is None else None
+    looks["saturation_frame"] = (stereo_saturation(left_bgr, right_bgr, frame.saturation) if frame.chroma is None
+                                 else None)
     # ...and the pair's pixels on the photo's colours, for its inner points where the contour rule bounds the
     # target and those colours are a minority of the pair (vision/colour_cells.py)
     cells = (stereo_cells(left_bgr, right_bgr, model.colour_cells, fit_params.min_value)
@@ -454,7 +455,7 @@ def estimate(model: PhotoModel, left_bgr: np.ndarray, right_bgr: np.ndarray, rig
         if img.shape[1] != cam.width or img.shape[0] != cam.height:
             raise InputError(f"{name} image is {img.shape[1]}x{img.shape[0]} px but the rig's "
                              f"[{name}] size is {cam.width}x{cam.height}")
-    frame = frame or stereo_hue(left_bgr, right_bgr, fit_params)
+    frame = frame or stereo_hue(left_bgr, right_bgr, fit_params, saturation=True)  # the pair's HSV once
     done = drive(acquisition(model, left_bgr, right_bgr, rig, ga_params, est_params, fit_params, frame, seed))
     results, islands = done.results, done.islands
     evaluations = sum(search.ga.evaluations for _, search in islands)

@@ -59,6 +59,7 @@ from photoservo.vision.photo_model import (
     HUE_BINS,
     NO_HUE,
     PhotoModel,
+    hue_and_saturation,
     hue_distance,
     hue_image,
 )
@@ -113,16 +114,26 @@ class FitnessParams:
 class StereoHue:
     """One stereo frame as hue images (OpenCV hue 0..179, NO_HUE = 255 where a pixel is too grey
     or too dark to carry hue). `left`, `right`: (H, W) uint8, C-contiguous. `chroma`: the pair's
-    a*b* planes where the contour rule applies (`vision/contour.py`), else None."""
+    a*b* planes where the contour rule applies (`vision/contour.py`), else None. `saturation`: the
+    pair's HSV saturation (left, right) (H, W) uint8, from the same conversion as the hue, where
+    `stereo_hue` was asked for it (`estimate`: detection's `bare_parts.body_purity` reads it), else None."""
 
     left: np.ndarray
     right: np.ndarray
     chroma: StereoChroma | None = None
+    saturation: tuple[np.ndarray, np.ndarray] | None = None
 
 
-def stereo_hue(left_bgr: np.ndarray, right_bgr: np.ndarray, params: FitnessParams) -> StereoHue:
+def stereo_hue(left_bgr: np.ndarray, right_bgr: np.ndarray, params: FitnessParams,
+               saturation: bool = False) -> StereoHue:
     """Hue images of a stereo pair (BGR uint8) for `fitness`, with the [fitness] saturation and
-    value floors (glare, foam and shadow get NO_HUE)."""
+    value floors (glare, foam and shadow get NO_HUE); with `saturation`, the pair's saturation too
+    (`StereoHue.saturation`; the tracker's frames go without: no plane more per frame)."""
+    if saturation:
+        (hl, sl), (hr, sr) = (hue_and_saturation(img, params.min_saturation, params.min_value)
+                              for img in (left_bgr, right_bgr))
+        return StereoHue(left=np.ascontiguousarray(hl), right=np.ascontiguousarray(hr), saturation=(sl, sr))
+
     def one(img: np.ndarray) -> np.ndarray:
         return np.ascontiguousarray(hue_image(img, params.min_saturation, params.min_value))
 

@@ -103,7 +103,18 @@ def hue_image(bgr: np.ndarray, min_saturation: int, min_value: int) -> np.ndarra
     """OpenCV hue (0..179) of a BGR image; pixels below the saturation or value floor get NO_HUE.
     Each frame of the tracker passes here (twice): cv2 passes only, no numpy temporaries — the
     hue OR-ed with the complement of the in-range mask is NO_HUE (255) wherever S or V is short."""
+    return _hsv_hue(cv2.cvtColor(bgr, cv2.COLOR_BGR2HSV), min_saturation, min_value)
+
+
+def hue_and_saturation(bgr: np.ndarray, min_saturation: int, min_value: int) -> tuple[np.ndarray, np.ndarray]:
+    """`hue_image` and the saturation S (uint8 (H, W), HSV's: `sampling.saturation` before its float32) of a
+    BGR image, from one HSV conversion."""
     hsv = cv2.cvtColor(bgr, cv2.COLOR_BGR2HSV)
+    return _hsv_hue(hsv, min_saturation, min_value), cv2.extractChannel(hsv, 1)
+
+
+def _hsv_hue(hsv: np.ndarray, min_saturation: int, min_value: int) -> np.ndarray:
+    """`hue_image` of an image already converted to HSV (uint8 (H, W, 3))."""
     hued = cv2.inRange(hsv, (0, int(min_saturation), int(min_value)), (255, 255, 255))
     return cv2.bitwise_or(cv2.extractChannel(hsv, 0), cv2.bitwise_not(hued))
 
