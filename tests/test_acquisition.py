@@ -9,6 +9,7 @@ import dataclasses
 
 import numpy as np
 import pytest
+from _bench_scenes import found_within_5, harbour_scene, renderer_scene
 
 from photoservo.config import load_config
 from photoservo.sim.scenes import random_scene
@@ -232,10 +233,7 @@ def test_many_hued_creature_with_the_waters_hue_is_found():
     frame = stereo_hue(sc.left, sc.right, CFG.fitness)
     hued = frame.left[frame.left < 180]
     assert model.target_hues[hued].mean() > 0.9  # the creature's hues are everywhere in the image
-    est = estimate(model, sc.left, sc.right, sc.rig, CFG.ga, CFG.estimator, CFG.fitness, seed=3)
-    assert est.found
-    t = np.array(sc.truth["position_mm"])
-    assert np.linalg.norm(est.position_mm - t) < 0.05 * t[2]
+    found_within_5(sc, model, seed=3)
 
 
 def test_silhouette_peak_finds_the_shape_inside_a_larger_region_of_its_hue():
@@ -340,19 +338,10 @@ def test_fish_on_water_dense_with_its_hue_is_found():
     """Harbour scene 1038 (a fish at 1.5 m on olive water with the fish's hue in 41 % of the left
     image's pixels): found within 3 % of its distance (before: no blob pair, a fit 12 times too
     small)."""
-    _harbour_found_within(1038, "fish", 0.03)
-
-
-def _harbour_found_within(seed: int, kind: str, frac: float) -> None:
-    """Harbour scene `seed` (same photo) estimated with the benchmark's seed: found within `frac` of its distance."""
-    from photoservo.sim import harbour
-
-    sc = harbour.random_scene(seed, CFG.synthetic, CFG.photo_model, kind=kind)
-    model = build_photo_model(sc.photo, CFG.photo_model)
-    est = estimate(model, sc.left, sc.right, sc.rig, CFG.ga, CFG.estimator, CFG.fitness, seed=seed - 1000)
+    sc, model = harbour_scene(1038, kind="fish")
+    est = found_within_5(sc, model, seed=38)
     t = np.array(sc.truth["position_mm"])
-    assert est.found
-    assert np.linalg.norm(est.position_mm - t) < frac * t[2]
+    assert np.linalg.norm(est.position_mm - t) < 0.03 * t[2]
 
 
 def test_crab_fitted_head_to_tail_beside_a_look_alike_is_turned():
@@ -361,15 +350,8 @@ def test_crab_fitted_head_to_tail_beside_a_look_alike_is_turned():
     against 0.79 near the truth), and the look-alike's island led by fitness, so only the
     look-alike's fit was refined. The island's turned twin (tilt +-30 degrees) fits clearly
     better, is kept and leads: found within 5 % of its distance."""
-    from photoservo.sim.scenes import EFFECTS
-
-    sc = random_scene(1055, CFG.synthetic, CFG.photo_model, kind="crab", other_photo=True,
-                      effects=tuple(EFFECTS), distractor=True, split=False)
-    model = build_photo_model(sc.photo, CFG.photo_model)
-    est = estimate(model, sc.left, sc.right, sc.rig, CFG.ga, CFG.estimator, CFG.fitness, seed=55)
-    t = np.array(sc.truth["position_mm"])
-    assert est.found
-    assert np.linalg.norm(est.position_mm - t) < 0.05 * t[2]
+    sc, model = renderer_scene(1055, kind="crab", other_photo=True, distractor=True, split=False)
+    found_within_5(sc, model, seed=55)
 
 
 @pytest.fixture(scope="module")
@@ -400,10 +382,7 @@ def test_a_fit_with_its_parts_in_place_is_not_turned_onto_a_piece(split_squid):
     failed its outline. A fit with its parts in place is not tried turned
     (candidates.turned_islands): found within 5 % of its distance."""
     sc, model = split_squid
-    est = estimate(model, sc.left, sc.right, sc.rig, CFG.ga, CFG.estimator, CFG.fitness, seed=36)
-    t = np.array(sc.truth["position_mm"])
-    assert est.found
-    assert np.linalg.norm(est.position_mm - t) < 0.05 * t[2]
+    found_within_5(sc, model, seed=36)
 
 
 @pytest.mark.parametrize("generator, seed, kind, distractor", [("harbour", 1029, "fish", False),
@@ -415,19 +394,11 @@ def test_a_fit_off_where_stereo_puts_the_creature_is_searched_again(generator, s
     renderer 1019's crab tilted 38 deg, fitted at 24 (7.4 % off, 0.755) beside a look-alike leading by
     fitness (turned onto the plane both images see: candidates.stereo_islands). Found within 5 % of its
     distance."""
-    from photoservo.sim import harbour
-    from photoservo.sim.scenes import EFFECTS
-
     if generator == "harbour":
-        sc = harbour.random_scene(seed, CFG.synthetic, CFG.photo_model, kind=kind, other_photo=True)
+        sc, model = harbour_scene(seed, kind=kind, other_photo=True)
     else:
-        sc = random_scene(seed, CFG.synthetic, CFG.photo_model, kind=kind, other_photo=True, effects=tuple(EFFECTS),
-                          distractor=distractor)
-    model = build_photo_model(sc.photo, CFG.photo_model)
-    est = estimate(model, sc.left, sc.right, sc.rig, CFG.ga, CFG.estimator, CFG.fitness, seed=seed - 1000)
-    t = np.array(sc.truth["position_mm"])
-    assert est.found
-    assert np.linalg.norm(est.position_mm - t) < 0.05 * t[2]
+        sc, model = renderer_scene(seed, kind=kind, other_photo=True, distractor=distractor)
+    found_within_5(sc, model, seed=seed - 1000)
 
 
 def test_a_fit_tilted_off_the_plane_both_images_see_is_searched_again_there():
@@ -438,10 +409,9 @@ def test_a_fit_tilted_off_the_plane_both_images_see_is_searched_again_there():
     follows the turn (`candidates.plane_turned`) it fits 0.792 and the plane re-measured under the re-fit
     agrees with it: found within 5 % of the distance, the tilt within 10 deg of the truth's."""
     from photoservo.geometry import heading_tilt_error
-    from photoservo.sim.scenes import EFFECTS
 
-    sc = random_scene(1146, CFG.synthetic, CFG.photo_model, kind="fish", effects=tuple(EFFECTS))
-    est = _found_within_5_percent(sc, seed=146)
+    sc, model = renderer_scene(1146, kind="fish")
+    est = found_within_5(sc, model, seed=146)
     assert heading_tilt_error(np.array(sc.truth["rotation"]), est.rotation)[1] < 10.0
 
 
@@ -450,7 +420,7 @@ def test_a_fit_the_hue_fitness_scores_as_the_truth_goes_where_both_images_see_it
     off in tilt scores as its truth (0.741 against 0.737); both images put the surface under it 6 % nearer,
     where the re-fit scores 0.714, 0.4 % off. Within `plane_fitness_tol` of the hue fitness' choice the stereo
     pair decides (`candidates.stereo_depth`): found within 5 % of the distance."""
-    _harbour_found_within(1120, "squid", 0.05)
+    found_within_5(*harbour_scene(1120, kind="squid"), seed=120)
 
 
 def test_a_plane_measured_on_glints_does_not_turn_the_fit():
@@ -493,10 +463,9 @@ def test_a_fit_failing_on_its_parts_alone_is_re_fitted_turned():
     quarter turns with heading +- 45 deg (`candidates.parted_turns`) it fits 0.888 with its parts in
     place: found within 5 % of its distance, the heading within 10 deg of the truth's."""
     from photoservo.geometry import heading_tilt_error
-    from photoservo.sim import harbour
 
-    sc = harbour.random_scene(1208, CFG.synthetic, CFG.photo_model, kind="crab")
-    est = _found_within_5_percent(sc, seed=208)
+    sc, model = harbour_scene(1208, kind="crab")
+    est = found_within_5(sc, model, seed=208)
     assert heading_tilt_error(np.array(sc.truth["rotation"]), est.rotation)[0] < 10.0
 
 
@@ -517,13 +486,3 @@ def test_a_look_alike_failing_on_its_parts_stays_rejected_re_fitted_turned(gener
     model = build_photo_model(sc.photo, CFG.photo_model)
     est = estimate(model, sc.left, sc.right, sc.rig, CFG.ga, CFG.estimator, CFG.fitness, seed=seed - 1500)
     assert est.candidates and not est.found
-
-
-def _found_within_5_percent(sc, seed: int):
-    """estimate() of a synthetic scene from its own photo-model, asserted found within 5 % of its distance."""
-    model = build_photo_model(sc.photo, CFG.photo_model)
-    est = estimate(model, sc.left, sc.right, sc.rig, CFG.ga, CFG.estimator, CFG.fitness, seed=seed)
-    t = np.array(sc.truth["position_mm"])
-    assert est.found
-    assert np.linalg.norm(est.position_mm - t) < 0.05 * t[2]
-    return est
