@@ -12,9 +12,8 @@ import cv2
 import numpy as np
 import pytest
 
-from _bench_scenes import found_within_5
+from _bench_scenes import candidate, found_within_5, harbour_scene
 from photoservo.config import load_config
-from photoservo.sim import harbour
 from photoservo.sim.scenes import EFFECTS, random_scene
 from photoservo.vision.appearance import stereo_grey
 from photoservo.vision.bare_parts import bare_counts, bare_flags
@@ -23,26 +22,13 @@ from photoservo.vision.estimator import estimate
 from photoservo.vision.fitness import inner_hues, project_model, stereo_hue
 from photoservo.vision.parts import absent_flags, absent_share, model_parts
 from photoservo.vision.photo_model import HUE_BINS, build_photo_model
-from photoservo.vision.pose_search import Candidate
 
 CFG = load_config()
 P = CFG.estimator
 
 
-def _harbour(seed, **kw):
-    """A harbour scene as benchmarks/accuracy.py draws it (seed 1000 + i)."""
-    sc = harbour.random_scene(seed, CFG.synthetic, CFG.photo_model, **kw)
-    return sc, build_photo_model(sc.photo, CFG.photo_model)
-
-
 def _looks(sc):
     return stereo_hue(sc.left, sc.right, CFG.fitness), stereo_grey(sc.left, sc.right), stereo_chroma(sc.left, sc.right)
-
-
-def _pose(c: dict) -> Candidate:
-    ax, ay = c["alpha_xy_px_per_mm"]
-    return Candidate(np.array(c["rotation"]), np.array(c["position_mm"]), float(np.sqrt(ax * ay)), c["fitness"], 0,
-                     "", aspect=float(np.sqrt(ay / ax)))
 
 
 def test_absent_flags_are_the_parts_absent_share_counts():
@@ -93,7 +79,7 @@ def test_parts_painted_over_with_the_water_are_bare_and_blurred_arms_are_not():
 def test_a_float_under_a_squid_model_is_not_found_for_its_arms_on_bare_water():
     # harbour null 1663 (benchmarks/accuracy.py --generator harbour --first-null 100): empty water
     # and an orange float; the squid's model fitted small onto the float, arms on water
-    sc, model = _harbour(1663, kind="squid", empty=True, distractor=True)
+    sc, model = harbour_scene(1663, kind="squid", empty=True, distractor=True)
     assert [d["kind"] for d in sc.truth["distractors"]] == ["float"]
     off = estimate(model, sc.left, sc.right, sc.rig, CFG.ga, dataclasses.replace(P, bare_water_z=0.0), CFG.fitness,
                    seed=163)
@@ -112,7 +98,7 @@ def test_a_part_one_camera_sees_does_not_excuse_a_look_alike(seed, distractor):
     # only. Counting only the parts both cameras miss (Dec 1, reverted) found them both. 2275: another
     # species under a squid's model, both arm parts on bare water; its layout holds both appearance cues
     # (0.29, 0.54), which excuse ONE part on bare water, not two (found when they excused any number)
-    sc, model = _harbour(seed, kind="squid", empty=True, distractor=True)
+    sc, model = harbour_scene(seed, kind="squid", empty=True, distractor=True)
     assert [d["kind"] for d in sc.truth["distractors"]] == [distractor]
     est = estimate(model, sc.left, sc.right, sc.rig, CFG.ga, P, CFG.fitness, seed=seed - 1500)
     assert not est.found
@@ -121,9 +107,9 @@ def test_a_part_one_camera_sees_does_not_excuse_a_look_alike(seed, distractor):
 def test_a_squid_whose_thin_arms_blur_into_the_water_keeps_them():
     # harbour 1018 (same photo, split by foam): two arm parts absent, their pixels half way from the
     # water's colour to the body's; found as before
-    sc, model = _harbour(1018, kind="squid", foam_split=True)
+    sc, model = harbour_scene(1018, kind="squid", foam_split=True)
     est = found_within_5(sc, model, seed=18)
-    c = _pose(est.candidates[0])
+    c = candidate(est.candidates[0])
     frame, grey, chroma = _looks(sc)
     labels = model_parts(model.inner_uv)
     n_absent, bare, _ = bare_counts(c.R_model, c.position_mm, c.alpha, model, frame, grey, chroma, sc.rig,
@@ -140,7 +126,7 @@ def test_another_individuals_squid_with_the_photos_layout_keeps_an_arm_on_bare_w
     # water and a second arm part absent: the bare-water rule's pattern, as a float's. Inside, the
     # brightness layout is the photo's by both appearance cues (a float of one hue has none to show):
     # found. With the layout not counted (min_appearance above every cue) the rule rejects it
-    sc, model = _harbour(1453, kind="squid", other_photo=True)
+    sc, model = harbour_scene(1453, kind="squid", other_photo=True)
     est = found_within_5(sc, model, seed=453)
     first = est.candidates[0]
     assert first["absent_parts"] == pytest.approx(2 / 12, abs=1e-3) and first["bare_parts"] >= 1
