@@ -466,7 +466,8 @@ PARTED_HEADING_DEG = 45.0
 
 
 def parted_turns(results: list[tuple[Detection, Candidate]], searches: dict[str, PoseSearch], looks: dict,
-                 p: EstimatorParams, seed: int = 0) -> Generator[int, None, list[tuple[Detection, Candidate]]]:
+                 p: EstimatorParams, seed: int = 0, left_bgr: np.ndarray | None = None,
+                 right_bgr: np.ndarray | None = None) -> Generator[int, None, list[tuple[Detection, Candidate]]]:
     """The candidates, re-ranked after each one that fails its parts alone (`Detection.fails_on_parts`:
     its contrast and its outline pass, the outline judged and not on another object, its body off the
     water; more than `max_absent_parts` of its parts absent, or two absent and one on bare water) was
@@ -477,9 +478,14 @@ def parted_turns(results: list[tuple[Detection, Candidate]], searches: dict[str,
     GA can end at the creature's place with its heading off (harbour 1208, a crab tilted 38 deg:
     heading 31 deg off, 0.703 against the truth's 0.838; 1238, a quarter turn off), where the
     model's legs lie beside the creature's and detection finds them absent; the decision stays
-    detection's, on the re-fit. Own random streams (`Generator.spawn`, one per turn whether tried or
-    not): the search's stream is as before. `searches`, `looks`: as `grown_outlines`'. One generation
-    per step."""
+    detection's, on the re-fit. Where no turn's re-fit replaces the candidate and hue bounds the target,
+    the candidate turned onto the plane both images see under it (`plane_turned`, given the pair
+    `left_bgr`, `right_bgr`) replaces it when it fits better and passes: an island's GA can end at the
+    creature's place tilted off it by more than the turns' tilt window (harbour 2744, a crab of the same
+    photo tilted 38 deg: fitted at 11, 43 deg off its plane, 0.806 with 3 parts absent; on the plane
+    0.959, 0.26 % off). Own random streams (`Generator.spawn`, one per turn whether tried or not;
+    `plane_turned` spawns its own only where the plane contradicts the fit): the search's stream is as
+    before. `searches`, `looks`: as `grown_outlines`'. One generation per step."""
     out = list(results)
     for k, (d, c) in enumerate(results):
         if not d.fails_on_parts or not np.isfinite(c.fitness):
@@ -491,12 +497,21 @@ def parted_turns(results: list[tuple[Detection, Candidate]], searches: dict[str,
             g = yield from search.local_steps(R, t, c.alpha, position_frac=0.03, heading_deg=PARTED_HEADING_DEG,
                                               tilt_deg=QUARTER_TILT_DEG, alpha_frac=0.08, rng=rng)
             best = g if g.fitness > best.fitness else best
-        if best is c:
+        if best is not c:
+            best = dataclasses.replace(best, source=c.source)
+            d_b = detect(best, search.model, search.frame, search.rig, search.fit_params, p, seed=seed, **looks)
+            if d_b.passed:
+                out[k] = (d_b, best)
+                continue
+        if left_bgr is None or right_bgr is None or search.frame.chroma is not None:
+            continue  # the contour regime: the stereo plane is not this step's
+        t = yield from plane_turned(search, c, left_bgr, right_bgr, p)
+        if t is c or not t.fitness > c.fitness:
             continue
-        best = dataclasses.replace(best, source=c.source)
-        d_b = detect(best, search.model, search.frame, search.rig, search.fit_params, p, seed=seed, **looks)
-        if d_b.passed:
-            out[k] = (d_b, best)
+        t = dataclasses.replace(t, source=c.source, generations=search.ga.generation)
+        d_t = detect(t, search.model, search.frame, search.rig, search.fit_params, p, seed=seed, **looks)
+        if d_t.passed:
+            out[k] = (d_t, t)
     return ranked(out, p.passed_standing_ratio)
 
 

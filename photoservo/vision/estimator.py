@@ -28,7 +28,8 @@ still fails after its head-to-tail twin was tried, each candidate that fails its
 alone is tried grown (`candidates.grown_outlines`: a fit shrunk inside the creature spills onto
 the creature itself), then each that fails its parts alone is re-fitted at quarter turns
 (`candidates.parted_turns`: a fit at the creature's place with its heading off has the model's
-legs beside the creature's), then each whose outline spills, whatever its parts say, is re-fitted at
+legs beside the creature's; where hue bounds the target and no turn passes, it is turned onto the plane
+both images see under it, a fit tilted off the creature having them beside it too), then each whose outline spills, whatever its parts say, is re-fitted at
 quarter turns grown (`candidates.grown_turns`: a fit shrunk inside the creature and turned on it). Where hue bounds the target, a first candidate that passes is searched again on
 the plane both images see under it where its tilt contradicts that plane (`candidates.stereo_tilt`), and at
 the depth both images see under it (`candidates.stereo_depth`).
@@ -433,7 +434,7 @@ def acquisition(model: PhotoModel, left_bgr: np.ndarray, right_bgr: np.ndarray, 
     if p.outline_grow > 1.0 and results and not results[0][0].passed:  # after the twin: it draws from the islands' rng
         results = yield from grown_outlines(results, dict(islands), looks, p, seed)
     if p.parted_turns and results and not results[0][0].passed:  # after the grown outlines (own streams)
-        results = yield from parted_turns(results, dict(islands), looks, p, seed)
+        results = yield from parted_turns(results, dict(islands), looks, p, seed, left_bgr, right_bgr)
     if p.grown_turns and results and not results[0][0].passed:  # after the parted turns (own streams)
         results = yield from grown_turns(results, dict(islands), looks, p, seed)
     if frame.chroma is None and results:  # where hue bounds the target: the answer on the plane and at the depth
