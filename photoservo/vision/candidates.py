@@ -133,9 +133,9 @@ def at_stereo_depth(search: PoseSearch, c: Candidate, left_bgr: np.ndarray, righ
     return dataclasses.replace(t, generations=search.ga.generation)
 
 
-# a first candidate whose normal lies more than this (deg) from the stereo plane under it (the lead island's re-fit
-# on that plane in a narrow window vetoed by the hue fitness) is searched again on the plane in a window following
-# the turn (`stereo_tilt`, `plane_turned`)
+# a candidate whose normal lies more than this (deg) from the stereo plane under it is searched again on the plane
+# in a window following the turn (`plane_turned`): the first (the lead island's re-fit on that plane in a narrow
+# window vetoed by the hue fitness; `stereo_tilt`), or one failing its parts alone (`parted_turns`)
 PLANE_TURN_MIN_DEG = 20.0
 # ...and that re-fit is the stereo pair's when the plane re-measured under it lies within this (deg) of its normal
 PLANE_AGREE_DEG = 10.0
@@ -163,7 +163,8 @@ def plane_turned(search: PoseSearch, c: Candidate, left_bgr: np.ndarray, right_b
                  p: EstimatorParams) -> Generator[int, None, Candidate]:
     """Where hue bounds the target, a fit whose tilt the stereo plane under it contradicts by more than
     PLANE_TURN_MIN_DEG (for the leading island's, after the hue fitness vetoed its narrow re-fit on that
-    plane: `PoseSearch.tilt_steps`, heading and scale held near): turned onto the plane and re-fitted in a
+    plane: `PoseSearch.tilt_steps`, heading and scale held near; `stereo_tilt`'s passing first candidate;
+    `parted_turns`' candidate failing its parts alone): turned onto the plane and re-fitted in a
     window that follows the turn (as `stereo_islands`) and per axis (`aspect_refined`), then at the depth
     both images see under the re-fit (`at_stereo_depth`),
     each kept when its hue fitness is at most `plane_fitness_tol` below the fit it replaces, and the whole
@@ -535,8 +536,7 @@ def parted_turns(results: list[tuple[Detection, Candidate]], searches: dict[str,
     """The candidates, re-ranked after each one that fails its parts alone (`Detection.fails_on_parts`:
     its contrast and its outline pass, the outline judged and not on another object, its body off the
     water; more than `max_absent_parts` of its parts absent, or two absent and one on bare water) was
-    re-fitted
-    turned: at each of PARTED_QUARTERS quarter turns about the photo mask's centroid
+    re-fitted turned: at each of PARTED_QUARTERS quarter turns about the photo mask's centroid
     (`twins.turned_about_centroid`), by a short GA (PARTED_HEADING_DEG); the fittest of
     them, when the hue fitness rose, replaces the candidate when it passes detection. An island's
     GA can end at the creature's place with its heading off (harbour 1208, a crab tilted 38 deg:
@@ -569,13 +569,13 @@ def parted_turns(results: list[tuple[Detection, Candidate]], searches: dict[str,
                 continue
         if left_bgr is None or right_bgr is None or search.frame.chroma is not None:
             continue  # the contour regime: the stereo plane is not this step's
-        t = yield from plane_turned(search, c, left_bgr, right_bgr, p)
-        if t is c or not t.fitness > c.fitness:
+        turned = yield from plane_turned(search, c, left_bgr, right_bgr, p)
+        if turned is c or not turned.fitness > c.fitness:
             continue
-        t = dataclasses.replace(t, source=c.source, generations=search.ga.generation)
-        d_t = detect(t, search.model, search.frame, search.rig, search.fit_params, p, seed=seed, **looks)
+        turned = dataclasses.replace(turned, source=c.source, generations=search.ga.generation)
+        d_t = detect(turned, search.model, search.frame, search.rig, search.fit_params, p, seed=seed, **looks)
         if d_t.passed:
-            out[k] = (d_t, t)
+            out[k] = (d_t, turned)
     return ranked(out, p.passed_standing_ratio)
 
 
