@@ -247,9 +247,9 @@ def refined(search: PoseSearch, c: Candidate, frame: StereoHue, left_bgr: np.nda
     grown fits (`PoseSearch.grown_steps`: its narrow peak), its turns shrunk (`shrunk_turns`) and its
     quarter turns (`quarter_twins`); the look-alike twins (mirror, heading + 180 deg); the tilt from the
     stereo plane; the per-axis size; where the contour rule scores, the depth both
-    images see under the fit (`stereo_plane.onto_surface`), and with `settle`, where that slide went beyond
-    STEREO_DEPTH_TOL, the ladder and the slide once more, and then the fit re-fitted with the body's grey layout
-    beside the fitness (`layout_refit`)."""
+    images see under the fit (`stereo_plane.onto_surface`), and with `settle`: where that slide went beyond
+    STEREO_DEPTH_TOL, the ladder and the slide once more; then, after the slide whether it went far or not, the
+    fit re-fitted with the body's grey layout beside the fitness (`layout_refit`)."""
     if frame.chroma is not None and p.contour_grow > 1.0:
         c = yield from contour_ladder(search, c, p)
     c = yield from search.twin_steps(c)
