@@ -23,7 +23,7 @@ from photoservo.vision.contour import StereoChroma
 from photoservo.vision.colour_cells import StereoCells
 from photoservo.vision.detection import MAX_BODY_PURITY, MAX_OFF_WATER, MIN_JUDGED_SHARE, Detection, detect
 from photoservo.vision.fitness import StereoHue, fitness, point_weight
-from photoservo.vision.parts import absent_parts
+from photoservo.vision.parts import absent_parts, foam_share_inner
 from photoservo.vision.photo_model import PhotoModel
 from photoservo.vision.pose_search import Candidate, PoseSearch
 from photoservo.vision.rig import Rig
@@ -602,6 +602,24 @@ def grown_about_centroid(R: np.ndarray, t: np.ndarray, alpha: float, model: Phot
     return np.asarray(t, dtype=np.float64) + np.asarray(R, dtype=np.float64) @ (c - f * c), alpha / f
 
 
+def foam_neutral(search: PoseSearch, foam: StereoHue | None, w: float):
+    """A fit's hue fitness with its inner points on foam (`foam`: the pair's hue with its foam marked,
+    `parts.foam_marked`; None, or where the contour rule bounds the target: the fitness as it is) counted as
+    matches: `w` (`fitness.point_weight`) per
+    point, the cameras' mean. The fitness scores a pixel without hue 0, so that no hue cannot raise a
+    score; but where a band of foam crosses the creature, a fit on one of its pieces scores above the
+    creature's whole pose, whose points the band hides (renderer 2727: a fish 0.62 x its size on its
+    tail half, 0.625 against the truth's 0.608; counted so, 0.671 against 0.752). Returns a function of
+    the candidate."""
+    n_in = len(search.model.inner_uv)
+
+    def score(g: Candidate) -> float:
+        if foam is None or search.frame.chroma is not None or not np.isfinite(g.fitness):
+            return g.fitness
+        return g.fitness + w * n_in * foam_share_inner(g.R_model, g.position_mm, g.alpha, search.model, foam, search.rig)
+    return score
+
+
 def grown_turns(results: list[tuple[Detection, Candidate]], searches: dict[str, PoseSearch], looks: dict,
                 p: EstimatorParams, seed: int = 0) -> Generator[int, None, list[tuple[Detection, Candidate]]]:
     """The candidates, re-ranked after each one whose outline spills (its contrast passes, its outline
@@ -616,9 +634,12 @@ def grown_turns(results: list[tuple[Detection, Candidate]], searches: dict[str, 
     20-92 degrees, its outer points on the creature and its parts beside the creature's), below the
     truth's fitness; growing alone keeps the heading (`grown_outlines`), turning alone the size
     (`parted_turns`). In 2138 the re-fit turned back a quarter and grown 1.35 x passes at 0.7005
-    against the candidate's 0.7009, the fittest re-fit (0.715, unturned) does not. Own random streams (`Generator.spawn`, one per try whether it runs or not):
+    against the candidate's 0.7009, the fittest re-fit (0.715, unturned) does not. When no candidate's
+    re-fit is chosen so, the re-fits are weighed again with their inner points on foam counted as matches
+    (`foam_neutral`), the candidate's too: a fit on one piece of a foam-split creature outscores the
+    whole creature, whose points under the band score 0 (renderer 2727). Own random streams (`Generator.spawn`, one per try whether it runs or not):
     the search's stream is as before. `searches`, `looks`: as `grown_outlines`'. One generation per step."""
-    out = list(results)
+    out, tried = list(results), []
     for k, (d, c) in enumerate(results):
         if (d.passed or d.contrast < p.min_contrast or not d.outer_on_target > p.max_outer_on_target
                 or d.outline_judged < MIN_JUDGED_SHARE or d.off_water > MAX_OFF_WATER or not np.isfinite(c.fitness)):
@@ -633,15 +654,33 @@ def grown_turns(results: list[tuple[Detection, Candidate]], searches: dict[str, 
             fits.append(dataclasses.replace(g, source=c.source))
         # the fittest re-fit that passes, among those fitting as well as the candidate to within the
         # fitness' resolution (one point's weight: `fitness.point_weight`)
-        bar = c.fitness - point_weight(search.model, search.fit_params)
-        for g in sorted(fits, key=lambda g: -g.fitness):
-            if not g.fitness >= bar:
-                break
-            d_g = detect(g, search.model, search.frame, search.rig, search.fit_params, p, seed=seed, **looks)
-            if d_g.passed and d_g.outer_on_target <= GROWN_SPILL_RATIO * d.outer_on_target:
-                out[k] = (d_g, g)
-                break
+        w = point_weight(search.model, search.fit_params)
+        tried.append((k, w, fits))
+        chosen = _first_passing([g for g in sorted(fits, key=lambda g: -g.fitness) if g.fitness >= c.fitness - w],
+                                d, search, looks, p, seed)
+        if chosen is not None:
+            out[k] = chosen
+    # when no candidate's re-fit was chosen so: among the others, those that fit as well with each fit's inner
+    # points on foam counted as matches (`foam_neutral`: a band of foam across the creature), fittest so first
+    for k, w, fits in tried if all(out[k] is results[k] for k, _, _ in tried) else ():
+        (d, c), search = results[k], searches[results[k][1].source]
+        score = foam_neutral(search, looks.get("foam"), w)
+        chosen = _first_passing([g for g in sorted(fits, key=lambda g: -score(g))
+                                 if not g.fitness >= c.fitness - w and score(g) >= score(c) - w], d, search, looks, p, seed)
+        if chosen is not None:
+            out[k] = chosen
     return ranked(out, p.passed_standing_ratio)
+
+
+def _first_passing(fits: list[Candidate], d: Detection, search: PoseSearch, looks: dict, p: EstimatorParams,
+                   seed: int) -> tuple[Detection, Candidate] | None:
+    """The first of `fits` that passes detection with its outline spilling at most GROWN_SPILL_RATIO of the
+    candidate's (`d`), with its detection; None when none does (`grown_turns`)."""
+    for g in fits:
+        d_g = detect(g, search.model, search.frame, search.rig, search.fit_params, p, seed=seed, **looks)
+        if d_g.passed and d_g.outer_on_target <= GROWN_SPILL_RATIO * d.outer_on_target:
+            return d_g, g
+    return None
 
 
 def same_surface_first(results: list[tuple[Detection, Candidate]], model: PhotoModel, frame: StereoHue, rig: Rig,
