@@ -604,19 +604,20 @@ def grown_about_centroid(R: np.ndarray, t: np.ndarray, alpha: float, model: Phot
 
 def foam_neutral(search: PoseSearch, foam: StereoHue | None, w: float):
     """A fit's hue fitness with its inner points on foam (`foam`: the pair's hue with its foam marked,
-    `parts.foam_marked`; None, or where the contour rule bounds the target: the fitness as it is) counted as
-    matches: `w` (`fitness.point_weight`) per
-    point, the cameras' mean. The fitness scores a pixel without hue 0, so that no hue cannot raise a
-    score; but where a band of foam crosses the creature, a fit on one of its pieces scores above the
-    creature's whole pose, whose points the band hides (renderer 2727: a fish 0.62 x its size on its
-    tail half, 0.625 against the truth's 0.608; counted so, 0.671 against 0.752). Returns a function of
-    the candidate."""
+    `parts.foam_marked`) counted as matches, `w` (`fitness.point_weight`) each, the cameras' mean, and the
+    share of its inner points on foam in each camera ((2,), `parts.foam_share_inner`); the fitness as it
+    is and no share without `foam` and where the contour rule bounds the target. The fitness scores a pixel
+    without hue 0, so that no hue cannot raise a score; but where a band of foam crosses the creature, a
+    fit on one of its pieces scores above the creature's whole pose, whose points the band hides (renderer
+    2727: a fish 0.62 x its size on its tail half, 0.625 against the truth's 0.608; counted so, 0.671
+    against 0.752). Returns a function of the candidate: (score, shares)."""
     n_in = len(search.model.inner_uv)
 
-    def score(g: Candidate) -> float:
+    def score(g: Candidate) -> tuple[float, np.ndarray]:
         if foam is None or search.frame.chroma is not None or not np.isfinite(g.fitness):
-            return g.fitness
-        return g.fitness + w * n_in * foam_share_inner(g.R_model, g.position_mm, g.alpha, search.model, foam, search.rig)
+            return g.fitness, np.zeros(2)
+        share = foam_share_inner(g.R_model, g.position_mm, g.alpha, search.model, foam, search.rig)
+        return g.fitness + w * n_in * float(np.mean(share)), share
     return score
 
 
@@ -660,13 +661,17 @@ def grown_turns(results: list[tuple[Detection, Candidate]], searches: dict[str, 
                                 d, search, looks, p, seed)
         if chosen is not None:
             out[k] = chosen
-    # when no candidate's re-fit was chosen so: among the others, those that fit as well with each fit's inner
-    # points on foam counted as matches (`foam_neutral`: a band of foam across the creature), fittest so first
+    # when no candidate's re-fit was chosen so: among the others, those lying under foam (`parts.under_foam`: at
+    # least foam_part_share of their inner points on it in each camera, a band across them) that fit as well
+    # with each fit's inner points on foam counted as matches, the candidate's too (`foam_neutral`), fittest so
+    # counted first
     for k, w, fits in tried if all(out[k] is results[k] for k, _, _ in tried) else ():
         (d, c), search = results[k], searches[results[k][1].source]
         score = foam_neutral(search, looks.get("foam"), w)
-        chosen = _first_passing([g for g in sorted(fits, key=lambda g: -score(g))
-                                 if not g.fitness >= c.fitness - w and score(g) >= score(c) - w], d, search, looks, p, seed)
+        bar = score(c)[0] - w
+        counted = sorted(((score(g), g) for g in fits if not g.fitness >= c.fitness - w), key=lambda sg: -sg[0][0])
+        chosen = _first_passing([g for (f, share), g in counted if f >= bar and share.min() >= p.foam_part_share],
+                                d, search, looks, p, seed)
         if chosen is not None:
             out[k] = chosen
     return ranked(out, p.passed_standing_ratio)

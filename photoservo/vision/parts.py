@@ -172,11 +172,12 @@ def absent_parts(R: np.ndarray, t: np.ndarray, alpha: float, model: PhotoModel, 
     return absent_share(hued, target_hue_lut(model.target_hues)[h], model_parts(model.inner_uv) if labels is None else labels, h == FOAM, foam_share)
 
 
-def foam_share_inner(R: np.ndarray, t: np.ndarray, alpha: float, model: PhotoModel, frame: StereoHue, rig: Rig) -> float:
-    """The share of one pose's inner points on foam (`frame` from `foam_marked`), the cameras' mean:
-    points the fitness scores 0 (no hue) where a band of foam hides the creature. R (3, 3) the model's
-    linear map, t (3,) mm in the left camera frame, alpha px/mm."""
-    return float(np.mean(inner_hues(R, t, alpha, model, frame, rig) == FOAM))
+def foam_share_inner(R: np.ndarray, t: np.ndarray, alpha: float, model: PhotoModel, frame: StereoHue,
+                     rig: Rig) -> np.ndarray:
+    """(2,) the share of one pose's inner points on foam (`frame` from `foam_marked`) in the left and the
+    right camera: points the fitness scores 0 (no hue) where a band of foam hides the creature. R (3, 3)
+    the model's linear map, t (3,) mm in the left camera frame, alpha px/mm."""
+    return np.mean(inner_hues(R, t, alpha, model, frame, rig) == FOAM, axis=1)
 
 
 def foam_marked(frame: StereoHue, value_left: np.ndarray, value_right: np.ndarray) -> StereoHue:
