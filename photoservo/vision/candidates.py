@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from collections.abc import Generator
+from collections.abc import Callable, Generator
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -538,7 +538,8 @@ def grown_about_centroid(R: np.ndarray, t: np.ndarray, alpha: float, model: Phot
     return np.asarray(t, dtype=np.float64) + np.asarray(R, dtype=np.float64) @ (c - f * c), alpha / f
 
 
-def foam_neutral(search: PoseSearch, foam: StereoHue | None, w: float):
+def foam_neutral(search: PoseSearch, foam: StereoHue | None,
+                 w: float) -> Callable[[Candidate], tuple[float, np.ndarray]]:
     """A fit's hue fitness with its inner points on foam (`foam`: the pair's hue with its foam marked,
     `parts.foam_marked`) counted as matches, `w` (`fitness.point_weight`) each, the cameras' mean, and the
     share of its inner points on foam in each camera ((2,), `parts.foam_share_inner`); the fitness as it
@@ -572,10 +573,12 @@ def grown_turns(results: list[tuple[Detection, Candidate]], searches: dict[str, 
     truth's fitness; growing alone keeps the heading (`grown_outlines`), turning alone the size
     (`parted_turns`). In 2138 the re-fit turned back a quarter and grown 1.35 x passes at 0.7005
     against the candidate's 0.7009, the fittest re-fit (0.715, unturned) does not. When no candidate's
-    re-fit is chosen so, the re-fits are weighed again with their inner points on foam counted as matches
-    (`foam_neutral`), the candidate's too: a fit on one piece of a foam-split creature outscores the
-    whole creature, whose points under the band score 0 (renderer 2727). Own random streams (`Generator.spawn`, one per try whether it runs or not):
-    the search's stream is as before. `searches`, `looks`: as `grown_outlines`'. One generation per step."""
+    re-fit is chosen so, the re-fits lying under foam (at least `foam_part_share` of their inner points on
+    it in each camera, `parts.under_foam`'s level) are weighed again with their inner points on foam
+    counted as matches (`foam_neutral`), the candidate's too: a fit on one piece of a foam-split creature
+    outscores the whole creature, whose points under the band score 0 (renderer 2727). Own random streams
+    (`Generator.spawn`, one per try whether it runs or not): the search's stream is as before. `searches`,
+    `looks`: as `grown_outlines`'. One generation per step."""
     out, tried = list(results), []
     for k, (d, c) in enumerate(results):
         if (d.passed or d.contrast < p.min_contrast or not d.outer_on_target > p.max_outer_on_target
