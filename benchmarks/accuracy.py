@@ -54,7 +54,8 @@ seeds no earlier set touched, so its waters are not the nulls' of another set). 
 `--first-scene 1700 --first-null 1300` (2700-2759, 2800-2899: added Dec 1's seventh session, whose
 held-out 7 had been spent; seeds no earlier set touched). Held-out 9 is `--first-scene 1900
 --first-null 1500` (2900-2959, 3000-3099: added Dec 1's eighth session, whose held-out 8 had been
-spent; seeds no earlier set touched).
+spent; seeds no earlier set touched). Held-out 10 is `--first-scene 2100 --first-null 1700` (3100-3159,
+3200-3299: added Dec 1's ninth session, whose held-out 9 had been spent; seeds no earlier set touched).
 Run: python benchmarks/accuracy.py [--quick] [--scenes 60] [--nulls 50] [--first-scene K] [--first-null K]
 """
 
@@ -267,9 +268,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--many-hued", type=int, default=0, metavar="N",
                     help="N extra scenes of the harbour generator's many-hued fish (its hues include the water's)")
     ap.add_argument("--first-scene", type=int, default=0, metavar="K",
-                    help="target scenes K..K+N-1 (seeds 1000+K..: 1000-1499 or 2100-2399 or 2500-2599 or 2700-2799 or 2900-2999): K >= 100 gives held-out scenes")
+                    help="target scenes K..K+N-1 (seeds 1000+K..: 1000-1499 or 2100-2399 or 2500-2599 or 2700-2799 or 2900-2999 or 3100-3199): K >= 100 gives held-out scenes")
     ap.add_argument("--first-null", type=int, default=0, metavar="K",
-                    help="null scenes K..K+N-1 (seeds 1500+K..: 1500-1699 or 1800-2299 or 2400-2499 or 2600-2699 or 2800-2899 or 3000-3099; the many-hued fish are 1700+)")
+                    help="null scenes K..K+N-1 (seeds 1500+K..: 1500-1699 or 1800-2299 or 2400-2499 or 2600-2699 or 2800-2899 or 3000-3099 or 3200-3299; the many-hued fish are 1700+)")
     ap.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE")
     ap.add_argument("--out", default=None, help="JSON (default benchmarks/out/accuracy[_harbour].json)")
     a = ap.parse_args(argv)
@@ -281,17 +282,20 @@ def main(argv: list[str] | None = None) -> int:
             or 1100 <= a.first_scene and a.first_scene + a.scenes <= 1400
             or 1500 <= a.first_scene and a.first_scene + a.scenes <= 1600
             or 1700 <= a.first_scene and a.first_scene + a.scenes <= 1800
-            or 1900 <= a.first_scene and a.first_scene + a.scenes <= 2000):
+            or 1900 <= a.first_scene and a.first_scene + a.scenes <= 2000
+            or 2100 <= a.first_scene and a.first_scene + a.scenes <= 2200):
         ap.error(f"--first-scene {a.first_scene} with --scenes {a.scenes}: target seeds must stay within 1000..1499 "
-                 "or 2100..2399 or 2500..2599 or 2700..2799 or 2900..2999")
+                 "or 2100..2399 or 2500..2599 or 2700..2799 or 2900..2999 or 3100..3199")
     if not (0 <= a.first_null and a.first_null + a.nulls <= 200 or 300 <= a.first_null and a.first_null + a.nulls <= 800
             or 900 <= a.first_null and a.first_null + a.nulls <= 1000
             or 1100 <= a.first_null and a.first_null + a.nulls <= 1200
             or 1300 <= a.first_null and a.first_null + a.nulls <= 1400
-            or 1500 <= a.first_null and a.first_null + a.nulls <= 1600):
+            or 1500 <= a.first_null and a.first_null + a.nulls <= 1600
+            or 1700 <= a.first_null and a.first_null + a.nulls <= 1800):
         ap.error(f"--first-null {a.first_null} with --nulls {a.nulls}: null seeds must stay within 1500..1699 "
-                 "or 1800..2299 or 2400..2499 or 2600..2699 or 2800..2899 or 3000..3099 (1700.. are the many-hued fish; "
-                 "2300.., 2500.., 2700.. and 2900.. are targets)")
+                 "or 1800..2299 or 2400..2499 or 2600..2699 or 2800..2899 or 3000..3099 or 3200..3299 "
+                 "(1700.. are the many-hued fish; "
+                 "2300.., 2500.., 2700.., 2900.. and 3100.. are targets)")
     cfg = load_config(None, a.overrides)
     load = os.getloadavg()
     print(f"accuracy benchmark: {a.scenes} target scenes, {a.nulls} null scenes; load average "
