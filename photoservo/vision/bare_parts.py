@@ -45,7 +45,7 @@ import numpy as np
 
 from photoservo.vision.appearance import StereoGrey
 from photoservo.vision.contour import StereoChroma
-from photoservo.vision.fitness import ModelProjection, StereoHue, nearest_pixel, project_model
+from photoservo.vision.fitness import ModelProjection, StereoHue, nearest_pixel, projected
 from photoservo.vision.parts import FOAM, absent_flags, under_foam
 from photoservo.vision.photo_model import HUE_BINS, PhotoModel, target_hue_lut
 from photoservo.vision.rig import Rig
@@ -88,7 +88,7 @@ def camera_bare_flags(R: np.ndarray, t: np.ndarray, alpha: float, model: PhotoMo
                       ) -> tuple[np.ndarray, np.ndarray]:
     """`bare_flags` per camera: (absent (2, n_parts), bare (2, n_parts): absent in that camera and on
     bare water there)."""
-    p = project_model(R, t, alpha, model, rig) if proj is None else proj
+    p = projected(R, t, alpha, model, rig, proj)
     n = int(labels.max()) + 1 if len(labels) else 0
     target = target_hue_lut(model.target_hues)
     absent = np.zeros((2, n), bool)
@@ -159,7 +159,7 @@ def body_gap(R: np.ndarray, t: np.ndarray, alpha: float, model: PhotoModel, fram
     angle across the target's hue tolerance, so a body on target hue a few a*b* units off the water
     (harbour held-out 5 null 2266: a dull leaf under a squid's model, 9.8 and 11.4) is a colour the
     water nearly has, not a creature's (tuned harbour answers 23-55)."""
-    p = project_model(R, t, alpha, model, rig) if proj is None else proj
+    p = projected(R, t, alpha, model, rig, proj)
     target = target_hue_lut(model.target_hues)
     out = np.full(2, np.nan)
     for k, (uv_in, uv_out, hue, ab) in enumerate(((p.inner_left[0], p.outer_left[0], frame.left, chroma.left),
@@ -222,7 +222,7 @@ def _body_samples(R: np.ndarray, t: np.ndarray, alpha: float, model: PhotoModel,
     carries no such values (a model built without a photo)."""
     if len(photo) != len(model.inner_uv):
         return []
-    p = project_model(R, t, alpha, model, rig) if proj is None else proj
+    p = projected(R, t, alpha, model, rig, proj)
     target = target_hue_lut(model.target_hues)
     out = []
     for k, (uv_in, hue, plane) in enumerate(((p.inner_left[0], frame.left, planes.left),
@@ -249,7 +249,7 @@ def off_water(R: np.ndarray, t: np.ndarray, alpha: float, model: PhotoModel, fra
     inside a larger object of another kind (renderer null 1849: a squid's model on a fish's brown
     band) has its outline there; a creature's lies on water, foam or glints (no hue). `water`: the
     pair's `stereo_water` (computed when None)."""
-    p = project_model(R, t, alpha, model, rig) if proj is None else proj
+    p = projected(R, t, alpha, model, rig, proj)
     target = target_hue_lut(model.target_hues)
     water = stereo_water(model, frame, chroma) if water is None else water
     out = np.zeros(2)

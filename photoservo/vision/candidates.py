@@ -23,7 +23,7 @@ from photoservo.vision.contour import StereoChroma
 from photoservo.vision.colour_cells import StereoCells
 from photoservo.vision.detection import MAX_BODY_PURITY, MAX_OFF_WATER, MIN_JUDGED_SHARE, Detection, detect
 from photoservo.vision.fitness import StereoHue, fitness, point_weight
-from photoservo.vision.parts import absent_parts, foam_share_inner
+from photoservo.vision.parts import absent_parts, foam_share_inner, shares_under_foam
 from photoservo.vision.photo_model import PhotoModel
 from photoservo.vision.pose_search import Candidate, PoseSearch
 from photoservo.vision.rig import Rig
@@ -609,7 +609,7 @@ def grown_turns(results: list[tuple[Detection, Candidate]], searches: dict[str, 
         score = foam_neutral(search, looks.get("foam"), w)
         bar = score(c)[0] - w
         counted = sorted(((score(g), g) for g in fits if not g.fitness >= c.fitness - w), key=lambda sg: -sg[0][0])
-        chosen = _first_passing([g for (f, share), g in counted if f >= bar and share.min() >= p.foam_part_share],
+        chosen = _first_passing([g for (f, share), g in counted if f >= bar and shares_under_foam(share, p.foam_part_share)],
                                 d, search, looks, p, seed)
         if chosen is not None:
             out[k] = chosen

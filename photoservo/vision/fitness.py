@@ -193,6 +193,13 @@ def project_model(R: np.ndarray, t: np.ndarray, alpha: np.ndarray, model: PhotoM
     return ModelProjection(inner_left=il, outer_left=ol, inner_right=ir, outer_right=orr)
 
 
+def projected(R: np.ndarray, t: np.ndarray, alpha: float, model: PhotoModel, rig: Rig,
+              proj: ModelProjection | None) -> ModelProjection:
+    """The `project_model` of ONE pose (R (3, 3), t (3,) mm, alpha px/mm): `proj` when the caller has it
+    (`detect` projects a candidate once for all of its rules), else computed."""
+    return project_model(R, t, alpha, model, rig) if proj is None else proj
+
+
 def nearest_pixel(uv: np.ndarray, shape: tuple[int, ...]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The nearest pixel to (..., 2) pixel coordinates in an image of `shape` (H, W, ...), as the
     fitness reads it: (row, column, inside), rows and columns (...) intp, 0 where the point falls
@@ -220,7 +227,7 @@ def inner_hues(R: np.ndarray, t: np.ndarray, alpha: float, model: PhotoModel, fr
     pixel): (2, N_in) int16, rows left and right camera, NO_HUE where the pixel carries no hue or
     the point falls outside the image. R (3, 3) the model's linear map, t (3,) mm in the left
     camera frame, alpha px/mm; `proj`: that pose's `project_model` (computed when None)."""
-    p = project_model(R, t, alpha, model, rig) if proj is None else proj
+    p = projected(R, t, alpha, model, rig, proj)
     rows = []
     for uv, hue in ((p.inner_left, frame.left), (p.inner_right, frame.right)):
         h, inside = _sample(uv, hue)

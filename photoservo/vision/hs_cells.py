@@ -19,11 +19,11 @@ def _cell_index(hsv: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return hsv[..., 0] // CELL_HUES, hsv[..., 1] // CELL_SATURATIONS
 
 
-def photo_cells(photo_bgr: np.ndarray, mask: np.ndarray, min_value: int) -> np.ndarray:
+def photo_cells(photo_bgr: np.ndarray, mask: np.ndarray, min_value: int, hsv: np.ndarray | None = None) -> np.ndarray:
     """(180 / CELL_HUES, 256 / CELL_SATURATIONS) bool: the cells holding >= CELL_SHARE of the target's
     pixels (`mask` > 0) with saturation >= CELL_MIN_SATURATION and value >= `min_value`; all False
-    when there are none."""
-    hsv = cv2.cvtColor(photo_bgr, cv2.COLOR_BGR2HSV)
+    when there are none. `hsv`: the photo in HSV when the caller has it (`build_photo_model`)."""
+    hsv = cv2.cvtColor(photo_bgr, cv2.COLOR_BGR2HSV) if hsv is None else hsv
     sel = (mask > 0) & (hsv[..., 1] >= CELL_MIN_SATURATION) & (hsv[..., 2] >= min_value)
     table = np.zeros((-(-180 // CELL_HUES), -(-256 // CELL_SATURATIONS)))
     h, s = _cell_index(hsv[sel])

@@ -131,7 +131,13 @@ def under_foam(foam: np.ndarray, foam_share: float) -> bool:
     targets 14-29 %), not glare or sun glitter beside a look-alike (renderer look-alike null 1853,
     a buoy in glitter: 8 % and 3 %, two of its crab model's legs on glitter)."""
     foam = np.atleast_2d(np.asarray(foam, bool))
-    return foam.size > 0 and float(foam.mean(axis=1).min()) >= foam_share
+    return foam.size > 0 and shares_under_foam(foam.mean(axis=1), foam_share)
+
+
+def shares_under_foam(shares: np.ndarray, foam_share: float) -> bool:
+    """`under_foam` from the share of the model's inner points on foam in each camera ((C,),
+    `foam_share_inner`'s): at least `foam_share` in every camera."""
+    return float(np.min(shares)) >= foam_share
 
 
 def counted(nh: np.ndarray, size: np.ndarray) -> np.ndarray:

@@ -19,7 +19,7 @@ import numpy as np
 
 from photoservo.errors import InputError
 from photoservo.vision.hs_cells import photo_cells
-from photoservo.vision.sampling import brightness, photo_values, saturation
+from photoservo.vision.sampling import brightness, photo_values, plane_values
 
 HUE_BINS = 180
 NO_HUE = 255  # marks a pixel too grey or too dark to carry a hue
@@ -168,15 +168,15 @@ def _check_photo(photo_bgr: object) -> np.ndarray:
     return photo_bgr
 
 
-def _background_like(photo_bgr: np.ndarray, params: PhotoModelParams) -> np.ndarray:
+def _background_like(photo_bgr: np.ndarray, params: PhotoModelParams, hsv: np.ndarray | None = None) -> np.ndarray:
     """Pixels whose colour matches the border's distribution (bool, H x W).
 
     Chromatic border pixels give a set of background hues (bins holding >= 0.5 % of the border,
     widened by the hue tolerance) and a saturation range; achromatic ones (too grey or too dark
     to carry a hue) give a brightness range and a tint range (Lab a*, b*). A pixel is
     background-like when it is chromatic with a background hue and saturation, or achromatic
-    with a background brightness and tint."""
-    hsv = cv2.cvtColor(photo_bgr, cv2.COLOR_BGR2HSV)
+    with a background brightness and tint. `hsv`: the photo in HSV when the caller has it."""
+    hsv = cv2.cvtColor(photo_bgr, cv2.COLOR_BGR2HSV) if hsv is None else hsv
     H, W = hsv.shape[:2]
     b = max(2, round(_BORDER_FRAC * min(H, W)))
     border = np.zeros((H, W), bool)
@@ -226,14 +226,15 @@ def _largest_filled(mask: np.ndarray) -> np.ndarray:
 
 
 def target_mask(photo_bgr: np.ndarray, params: PhotoModelParams,
-                roi: tuple[int, int, int, int] | None = None) -> np.ndarray:
+                roi: tuple[int, int, int, int] | None = None, hsv: np.ndarray | None = None) -> np.ndarray:
     """Method step 1: the target region of the photo (uint8 H x W, 255 = target).
 
     Without `roi`: the hue scan from the border inward — the background distribution is taken
     from the border strip, grown inward through every background-like pixel connected to the
     border, and the target is the largest remaining component with its holes filled.
     With `roi=(x, y, w, h)` (px): OpenCV GrabCut initialised with that rectangle, for cluttered
-    photos whose border is not a plain background. Raises InputError when nothing separates."""
+    photos whose border is not a plain background. `hsv`: the photo in HSV (uint8 (H, W, 3)) when the
+    caller has it (`build_photo_model`), else converted here. Raises InputError when nothing separates."""
     photo_bgr = _check_photo(photo_bgr)
     H, W = photo_bgr.shape[:2]
     if roi is not None:
@@ -250,7 +251,7 @@ def target_mask(photo_bgr: np.ndarray, params: PhotoModelParams,
         cv2.grabCut(img, gc, (x, y, w, h), bgd, fgd, 5, cv2.GC_INIT_WITH_RECT)
         fg = (gc == cv2.GC_FGD) | (gc == cv2.GC_PR_FGD)
     else:
-        bg_like = _background_like(photo_bgr, params)
+        bg_like = _background_like(photo_bgr, params, hsv)
         # grow inward: background = background-like pixels connected to the photo's border
         pad = np.pad(bg_like, 1, constant_values=True).astype(np.uint8)
         _, lab = cv2.connectedComponents(pad, connectivity=4)
@@ -339,8 +340,10 @@ def build_photo_model(photo_bgr: np.ndarray, params: PhotoModelParams,
 
     Raises InputError when the photo is not a colour image, no target separates, or the target
     carries no hue (all grey/white/dark)."""
-    mask = target_mask(photo_bgr, params, roi)
-    hue = hue_image(photo_bgr, params.min_saturation, params.min_value)
+    photo_bgr = _check_photo(photo_bgr)
+    hsv = cv2.cvtColor(photo_bgr, cv2.COLOR_BGR2HSV)  # once: the mask's scan, the hues, saturations and cells read it
+    mask = target_mask(photo_bgr, params, roi, hsv)
+    hue = _hsv_hue(hsv, params.min_saturation, params.min_value)
     x, y, w, h = cv2.boundingRect(mask)
     origin = (x + (w - 1) / 2.0, y + (h - 1) / 2.0)
     interval = float(params.interval_px)
@@ -366,8 +369,8 @@ def build_photo_model(photo_bgr: np.ndarray, params: PhotoModelParams,
                       target_hues=lut, size_px=(float(w), float(h)), origin_px=origin, mask=mask,
                       inner_value=photo_values(photo_bgr, pin, interval),
                       inner_brightness=photo_values(photo_bgr, pin, interval, brightness),
-                      inner_saturation=photo_values(photo_bgr, pin, interval, saturation),
-                      colour_cells=photo_cells(photo_bgr, mask, params.min_value))
+                      inner_saturation=plane_values(hsv[..., 1].astype(np.float32), pin, interval),
+                      colour_cells=photo_cells(photo_bgr, mask, params.min_value, hsv))
 
 
 def load_photo_model(path: str, params: PhotoModelParams,

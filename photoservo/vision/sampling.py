@@ -63,8 +63,13 @@ def photo_values(photo_bgr: np.ndarray, points_px: np.ndarray, pitch_px: float, 
     """`PhotoModel.inner_value`: the photo's grey level at each inner point (photo px), from the
     photo blurred by a Gaussian of sigma half a sampling pitch (each point stands for its cell of
     the grid, not for one pixel); `plane` = `brightness`: `PhotoModel.inner_brightness`. float32 (N,)."""
-    g = plane(photo_bgr)
-    g = cv2.GaussianBlur(g, (0, 0), max(0.5, 0.5 * pitch_px))
+    return plane_values(plane(photo_bgr), points_px, pitch_px)
+
+
+def plane_values(plane_img: np.ndarray, points_px: np.ndarray, pitch_px: float) -> np.ndarray:
+    """`photo_values` from a plane of the photo already computed (float32 (H, W): `grey`, `brightness`,
+    `saturation` or its equal from the photo's HSV, `photo_model.build_photo_model`). float32 (N,)."""
+    g = cv2.GaussianBlur(plane_img, (0, 0), max(0.5, 0.5 * pitch_px))
     return patches(g, np.asarray(points_px, dtype=np.float64), 0)[0][:, 0, 0].astype(np.float32)
 
 
