@@ -22,6 +22,7 @@ from photoservo.vision.fitness import (
     fitness,
     fitness_reference,
     project_model,
+    projected,
     stereo_hue,
 )
 from photoservo.vision.photo_model import NO_HUE
@@ -275,3 +276,14 @@ def test_kernel_equals_reference_anywhere(pose):
     rig = distorted_rig()
     np.testing.assert_array_equal(counts_compiled(R, t, alpha, MODEL, FRAME, rig, PARAMS),
                                   counts_reference(R, t, alpha, MODEL, FRAME, rig, PARAMS))
+
+
+def test_projected_is_the_callers_projection_when_given_else_the_poses_own():
+    """`projected`: a rule handed `detect`'s projection reads it as it is (the same object); without it, the
+    pose's `project_model`, to the bit."""
+    model, rig = make_model()[0], default_rig()
+    own = project_model(R_TRUE, T_TRUE, ALPHA_TRUE, model, rig)
+    assert projected(R_TRUE, T_TRUE, ALPHA_TRUE, model, rig, own) is own
+    computed = projected(R_TRUE, T_TRUE, ALPHA_TRUE, model, rig, None)
+    for f in ("inner_left", "inner_right", "outer_left", "outer_right"):
+        assert np.array_equal(getattr(computed, f), getattr(own, f))

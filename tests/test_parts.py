@@ -15,8 +15,8 @@ from photoservo.sim.scenes import EFFECTS, random_scene
 from photoservo.vision.detection import detect
 from photoservo.vision.estimator import estimate
 from photoservo.vision.fitness import StereoHue, inner_hues, stereo_hue
-from photoservo.vision.parts import (FOAM, PARTS, absent_flags, absent_parts, absent_share, foam_marked, model_parts,
-                                     under_foam)
+from photoservo.vision.parts import (FOAM, PARTS, absent_flags, absent_parts, absent_share, foam_marked, foam_share_inner,
+                                     model_parts, shares_under_foam, under_foam)
 from photoservo.vision.photo_model import HUE_BINS, NO_HUE, build_photo_model
 from photoservo.vision.pose_search import Candidate
 
@@ -153,6 +153,7 @@ def test_foam_is_marked_and_a_part_straddling_it_is_not_judged():
     foam = ~hued
     assert absent_flags(hued, on, labels).tolist() == [[True, False]]
     assert under_foam(foam, 0.15) and not under_foam(foam, 0.2)  # 3 of the model's 20 points on foam
+    assert shares_under_foam(foam.mean(axis=1), 0.15) and not shares_under_foam(foam.mean(axis=1), 0.2)
     assert absent_flags(hued, on, labels, foam, 0.1).tolist() == [[False, False]]
     # a model with too few of its points on foam (glitter beside a look-alike) has every part judged
     assert absent_flags(hued, on, labels, foam, 0.2).tolist() == [[True, False]]
@@ -171,3 +172,18 @@ def test_a_split_squid_with_a_part_at_the_band_edge_is_found():
     off = estimate(model, sc.left, sc.right, sc.rig, CFG.ga, dataclasses.replace(P, foam_part_share=1.0),
                    CFG.fitness, seed=234)
     assert not off.found
+
+
+def test_under_foam_from_the_mask_and_from_a_poses_shares_agree():
+    """`candidates.grown_turns` asks `shares_under_foam` of a pose's `foam_share_inner` what `absent_flags` asks
+    `under_foam` of its points on foam: the same answer for a split squid at its true pose, at every level (a
+    level between the two cameras' shares: under foam in one camera only is not under foam)."""
+    sc, model = _scene(1004, kind="squid", split=True)
+    frame = stereo_hue(sc.left, sc.right, CFG.fitness)
+    marked = foam_marked(frame, *(np.max(img, axis=2).astype(np.float32) for img in (sc.left, sc.right)))
+    t = _truth(sc)
+    share = foam_share_inner(t.R_model, t.position_mm, t.alpha, model, marked, sc.rig)
+    on_foam = inner_hues(t.R_model, t.position_mm, t.alpha, model, marked, sc.rig) == FOAM
+    assert share.min() > 0.05  # the band lies across it in both cameras
+    for level in (0.5 * share.min(), share.min(), 0.5 * (share.min() + share.max()) + 1e-9, share.max() + 1e-9):
+        assert shares_under_foam(share, level) == under_foam(on_foam, level) == (level <= share.min())

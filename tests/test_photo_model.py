@@ -24,8 +24,11 @@ from photoservo.vision.photo_model import (
     load_photo_model,
     parse_roi,
     target_hue_lut,
+    target_mask,
 )
 from photoservo.sim.specimens import SPECIES, specimen
+from photoservo.vision.hs_cells import photo_cells
+from photoservo.vision.sampling import photo_values, saturation
 
 PARAMS = load_config().photo_model
 
@@ -339,3 +342,21 @@ def reach(m) -> np.ndarray:
     dist = cv2.distanceTransform(outside, cv2.DIST_L2, cv2.DIST_MASK_PRECISE)
     ij = np.rint(m.outer_uv + np.array(m.origin_px)).astype(int) + pad
     return dist[ij[:, 1], ij[:, 0]]
+
+
+@pytest.mark.parametrize("kind", ["squid", "crab", "fish"])
+def test_the_photo_converted_to_hsv_once_gives_what_each_plane_s_own_conversion_gives(kind):
+    """`build_photo_model` converts the photo to HSV once for the border scan, the hues, the saturation at the
+    inner points and the colour cells: each as the function converting the photo itself gives it, to the bit."""
+    photo = specimen(kind, 0, True)
+    m = build_photo_model(photo, PARAMS)
+    hue = hue_image(photo, PARAMS.min_saturation, PARAMS.min_value)
+    assert np.array_equal(m.mask, target_mask(photo, PARAMS))
+    assert np.array_equal(target_mask(photo, PARAMS, hsv=cv2.cvtColor(photo, cv2.COLOR_BGR2HSV)), m.mask)
+    pin = m.inner_uv + np.array(m.origin_px)
+    ij = np.rint(pin).astype(int)
+    assert (hue[ij[:, 1], ij[:, 0]] != NO_HUE).mean() > 0.9  # the hues read are the photo's
+    pitch = float(np.min(np.diff(np.unique(np.round(m.inner_uv[:, 0], 3)))))
+    assert np.array_equal(m.inner_saturation, photo_values(photo, pin, pitch, saturation))
+    assert m.inner_saturation.dtype == np.float32
+    assert np.array_equal(m.colour_cells, photo_cells(photo, m.mask, PARAMS.min_value))
