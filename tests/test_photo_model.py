@@ -360,3 +360,29 @@ def test_the_photo_converted_to_hsv_once_gives_what_each_plane_s_own_conversion_
     assert np.array_equal(m.inner_saturation, photo_values(photo, pin, pitch, saturation))
     assert m.inner_saturation.dtype == np.float32
     assert np.array_equal(m.colour_cells, photo_cells(photo, m.mask, PARAMS.min_value))
+
+
+def test_the_photo_model_build_converts_the_photo_to_hsv_once_and_takes_its_hues_from_that(monkeypatch):
+    """`build_photo_model` converts the photo to HSV once (the border scan, the hues, the saturation at the
+    inner points and the colour cells all read that conversion), and the hues it samples are that HSV's
+    (`_hsv_hue`, as `hue_image` of the photo): a second conversion, or hues from another image, fail here."""
+    from photoservo.vision import photo_model
+
+    photo = specimen("squid", 0, True)
+    convert, hsv_hue = cv2.cvtColor, photo_model._hsv_hue
+    converted, hued = [], []
+
+    def counted(src, code, *args, **kwargs):
+        if code == cv2.COLOR_BGR2HSV:
+            converted.append(src)
+        return convert(src, code, *args, **kwargs)
+
+    def recorded(hsv, min_saturation, min_value):
+        hued.append(hsv)
+        return hsv_hue(hsv, min_saturation, min_value)
+
+    monkeypatch.setattr(cv2, "cvtColor", counted)
+    monkeypatch.setattr(photo_model, "_hsv_hue", recorded)
+    build_photo_model(photo, PARAMS)
+    assert len(converted) == 1 and converted[0] is photo
+    assert len(hued) == 1 and np.array_equal(hued[0], convert(photo, cv2.COLOR_BGR2HSV))

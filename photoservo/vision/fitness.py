@@ -195,8 +195,9 @@ def project_model(R: np.ndarray, t: np.ndarray, alpha: np.ndarray, model: PhotoM
 
 def projected(R: np.ndarray, t: np.ndarray, alpha: float, model: PhotoModel, rig: Rig,
               proj: ModelProjection | None) -> ModelProjection:
-    """The `project_model` of ONE pose (R (3, 3), t (3,) mm, alpha px/mm): `proj` when the caller has it
-    (`detect` projects a candidate once for all of its rules), else computed."""
+    """The `project_model` of ONE pose (R (3, 3) the model's linear map, `Candidate.R_model`; t (3,) mm in
+    the left camera frame; alpha px/mm): `proj` when the caller has it (`detect` projects a candidate once
+    for all of its rules), else computed."""
     return project_model(R, t, alpha, model, rig) if proj is None else proj
 
 
