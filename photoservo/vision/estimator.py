@@ -54,7 +54,7 @@ import numpy as np
 from photoservo.errors import InputError
 from photoservo.vision.appearance import stereo_grey, stereo_saturation, stereo_value
 from photoservo.vision.bare_parts import stereo_water
-from photoservo.vision.candidates import (appearance_twin, grown_outlines, grown_turns, parted_turns, ranked, refined,
+from photoservo.vision.candidates import (appearance_twin, foam_turns, grown_outlines, grown_turns, parted_turns, ranked, refined,
                                           same_surface_first, scaled_plane, stereo_depth, stereo_islands, stereo_tilt,
                                           turned_islands)
 from photoservo.vision.contour import stereo_chroma
@@ -139,6 +139,7 @@ class EstimatorParams:
     # and this (`grown_outlines`; 1 = off)
     parted_turns: bool  # ...and one failing its parts alone re-fitted at quarter turns (`candidates.parted_turns`)
     grown_turns: bool  # ...and one whose outline spills re-fitted at quarter turns, grown (`candidates.grown_turns`)
+    foam_turns: bool  # ...and one failing its parts alone re-fitted at quarter turns counting foam (`candidates.foam_turns`)
     foam_bridge: bool  # seed islands also from pieces joined across foam, some paired alone (`seeding.bridged_pairs`)
     passed_standing_ratio: float  # a candidate that passes ranks first when it stands >= this x the top, which fails
     twin_appearance: bool  # let the appearance cue choose between the first candidate and its head-to-tail twin
@@ -438,6 +439,8 @@ def acquisition(model: PhotoModel, left_bgr: np.ndarray, right_bgr: np.ndarray, 
         results = yield from parted_turns(results, dict(islands), looks, p, seed, left_bgr, right_bgr)
     if p.grown_turns and results and not results[0][0].passed:  # after the parted turns (own streams)
         results = yield from grown_turns(results, dict(islands), looks, p, seed)
+    if p.foam_turns and results and not results[0][0].passed:  # after the grown turns (own streams)
+        results = yield from foam_turns(results, dict(islands), looks, p, seed)
     if frame.chroma is None and results:  # where hue bounds the target: the answer on the plane and at the depth
         search = dict(islands)[results[0][1].source]  # both images see
         results[0] = yield from stereo_tilt(results[0], search, left_bgr, right_bgr, looks, p, seed)

@@ -62,7 +62,7 @@ import math
 import cv2
 import numpy as np
 
-from photoservo.vision.fitness import ModelProjection, StereoHue, inner_hues
+from photoservo.vision.fitness import ModelProjection, StereoHue, inner_hues, nearest_pixel, project_model
 from photoservo.vision.photo_model import HUE_BINS, NO_HUE, PhotoModel, target_hue_lut
 from photoservo.vision.rig import Rig
 
@@ -184,6 +184,19 @@ def foam_share_inner(R: np.ndarray, t: np.ndarray, alpha: float, model: PhotoMod
     right camera: points the fitness scores 0 (no hue) where a band of foam hides the creature. R (3, 3)
     the model's linear map, t (3,) mm in the left camera frame, alpha px/mm."""
     return np.mean(inner_hues(R, t, alpha, model, frame, rig) == FOAM, axis=1)
+
+
+def foam_shares(R: np.ndarray, t: np.ndarray, alpha: np.ndarray, model: PhotoModel, frame: StereoHue,
+                rig: Rig) -> np.ndarray:
+    """(P, 2) `foam_share_inner` of a population: each pose's share of inner points on foam (`frame` from
+    `foam_marked`) in the left and the right camera. R (P, 3, 3) the models' linear maps, t (P, 3) mm,
+    alpha (P,) px/mm."""
+    p = project_model(R, t, alpha, model, rig)
+    shares = []
+    for uv, marked in ((p.inner_left, frame.left), (p.inner_right, frame.right)):
+        r, c, inside = nearest_pixel(uv, marked.shape)
+        shares.append(np.mean((marked[r, c] == FOAM) & inside, axis=1))
+    return np.stack(shares, axis=1)
 
 
 def foam_marked(frame: StereoHue, value_left: np.ndarray, value_right: np.ndarray) -> StereoHue:

@@ -18,9 +18,10 @@ from typing import TYPE_CHECKING, TypeVar
 
 import numpy as np
 
-from photoservo.vision.fitness import FitnessParams, StereoHue, fitness
+from photoservo.vision.fitness import FitnessParams, StereoHue, fitness, point_weight
 from photoservo.vision.ga import GA, GAParams, Region
 from photoservo.vision.genes import GeneSpace
+from photoservo.vision.parts import foam_shares
 from photoservo.vision.photo_model import PhotoModel
 from photoservo.vision.rig import Rig
 from photoservo.vision.sampling import grey
@@ -106,12 +107,15 @@ class PoseSearch:
     """One GA searching poses of `model` against a stereo frame (method steps 4-5). The
     population persists: `set_frame` swaps the frame, `set_window` / `reset_full` the region,
     `seed` injects poses, `step(n)` advances n generations. Used by `estimate` (one per island)
-    and by the tracking loop (one for the whole run)."""
+    and by the tracking loop (one for the whole run). With `foam` (the pair's hue with its foam marked,
+    `parts.foam_marked`) the GA scores each pose's inner points on foam as matches, one point's weight
+    (`fitness.point_weight`) each, the cameras' mean, as `candidates.foam_neutral` weighs a fit (its
+    candidates' `fitness` is so counted)."""
 
     def __init__(self, model: PhotoModel, rig: Rig, frame: StereoHue, ga_params: GAParams,
                  est_params: EstimatorParams, fit_params: FitnessParams, rng: np.random.Generator,
-                 region: Region | None = None) -> None:
-        self.model, self.rig, self.frame = model, rig, frame
+                 region: Region | None = None, foam: StereoHue | None = None) -> None:
+        self.model, self.rig, self.frame, self.foam = model, rig, frame, foam
         self.fit_params, self.est_params = fit_params, est_params
         self.space = GeneSpace(est_params.genes, rig, model, est_params)
         self.ga = GA(self._fitness, region or self.space.full_region(), ga_params, rng)
@@ -123,6 +127,9 @@ class PoseSearch:
         if np.any(valid):
             f[valid] = fitness(R[valid], t[valid], alpha[valid], self.model, self.frame, self.rig,
                                self.fit_params)
+            if self.foam is not None:
+                shares = foam_shares(R[valid], t[valid], alpha[valid], self.model, self.foam, self.rig)
+                f[valid] += point_weight(self.model, self.fit_params) * len(self.model.inner_uv) * shares.mean(axis=1)
         return f
 
     def set_frame(self, frame: StereoHue) -> None:
@@ -187,14 +194,16 @@ class PoseSearch:
         return drive(self.local_steps(R, t, alpha, position_frac, heading_deg, tilt_deg, alpha_frac))
 
     def local_steps(self, R: np.ndarray, t: np.ndarray, alpha: float, position_frac: float, heading_deg: float,
-                    tilt_deg: float, alpha_frac: float, rng: np.random.Generator | None = None
-                    ) -> Generator[int, None, Candidate]:
+                    tilt_deg: float, alpha_frac: float, rng: np.random.Generator | None = None,
+                    foam: StereoHue | None = None) -> Generator[int, None, Candidate]:
         """`local_search` one generation per step (see `steps`); `rng`: its own random stream
-        (default: this search's)."""
+        (default: this search's); `foam`: its GA scores inner points on foam as matches (the class
+        docstring; the result's `fitness` so counted)."""
         p = self.est_params
         short = dataclasses.replace(p, min_generations=max(1, p.patience // 2), patience=max(2, p.patience // 2),
                                     max_generations=max(p.patience, p.max_generations // 4))
-        sub = PoseSearch(self.model, self.rig, self.frame, self.ga.params, short, self.fit_params, rng or self.ga.rng)
+        sub = PoseSearch(self.model, self.rig, self.frame, self.ga.params, short, self.fit_params, rng or self.ga.rng,
+                         foam=foam)
         sub.ga.reset(sub.space.window(R, t, alpha, position_mm=position_frac * float(t[2]), heading_deg=heading_deg,
                                       tilt_deg=tilt_deg, alpha_frac=alpha_frac))
         sub.seed(R, t, alpha)
