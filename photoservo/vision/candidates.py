@@ -5,7 +5,8 @@ standing (`ranked`, vision/detection.py; where the contour rule scores, those wh
 two surfaces last: `same_surface_first`), the first candidate's twin chosen by the appearance cue
 (`appearance_twin`), the candidates failing their outline alone tried grown (`grown_outlines`), those
 failing their parts alone re-fitted at quarter turns (`parted_turns`), those whose outline spills
-re-fitted turned and grown (`grown_turns`), and the first, when it passes, searched again at the
+re-fitted turned and grown (`grown_turns`), those failing their parts alone re-fitted at quarter turns counting
+the points on foam (`foam_turns`), and the first, when it passes, searched again at the
 depth both images see (`stereo_depth`). Each search step is a generator yielding the GA generations it ran (`pose_search.drive` runs one to its end; the
 tracker spreads them over camera frames)."""
 

@@ -31,9 +31,11 @@ the creature itself), then each that fails its parts alone is re-fitted at quart
 legs beside the creature's; where hue bounds the target and no turn passes, it is turned onto the plane
 both images see under it, a fit tilted off the creature having them beside it too), then each whose
 outline spills, whatever its parts say, is re-fitted at quarter turns grown (`candidates.grown_turns`: a
-fit shrunk inside the creature and turned on it). Where hue bounds the target, a first candidate that
-passes is searched again on the plane both images see under it where its tilt contradicts that plane
-(`candidates.stereo_tilt`), and at the depth both images see under it (`candidates.stereo_depth`).
+fit shrunk inside the creature and turned on it), then, where hue bounds the target, each that fails its parts
+alone is re-fitted at quarter turns counting its inner points on foam as matches (`candidates.foam_turns`: a
+fit beside a foam band across the creature outscores the whole creature, whose points under the band score
+0). Where hue bounds the target, a first candidate that passes is searched again on the plane both images see
+under it where its tilt contradicts that plane (`candidates.stereo_tilt`), and at the depth both images see under it (`candidates.stereo_depth`).
 
 When the target's hues cover most of the pair (a many-hued creature in water of one of its hues;
 a real scene whose background lies within the hue tolerance of the target), seeds come from the
@@ -54,9 +56,9 @@ import numpy as np
 from photoservo.errors import InputError
 from photoservo.vision.appearance import stereo_grey, stereo_saturation, stereo_value
 from photoservo.vision.bare_parts import stereo_water
-from photoservo.vision.candidates import (appearance_twin, foam_turns, grown_outlines, grown_turns, parted_turns, ranked, refined,
-                                          same_surface_first, scaled_plane, stereo_depth, stereo_islands, stereo_tilt,
-                                          turned_islands)
+from photoservo.vision.candidates import (appearance_twin, foam_turns, grown_outlines, grown_turns, parted_turns,
+                                          ranked, refined, same_surface_first, scaled_plane, stereo_depth,
+                                          stereo_islands, stereo_tilt, turned_islands)
 from photoservo.vision.contour import stereo_chroma
 from photoservo.vision.colour_cells import distinctive, stereo_cells
 from photoservo.vision.detection import Detection, detect
@@ -139,7 +141,7 @@ class EstimatorParams:
     # and this (`grown_outlines`; 1 = off)
     parted_turns: bool  # ...and one failing its parts alone re-fitted at quarter turns (`candidates.parted_turns`)
     grown_turns: bool  # ...and one whose outline spills re-fitted at quarter turns, grown (`candidates.grown_turns`)
-    foam_turns: bool  # ...and one failing its parts alone re-fitted at quarter turns counting foam (`candidates.foam_turns`)
+    foam_turns: bool  # ...and one failing its parts alone re-fitted at quarter turns counting foam (`foam_turns`)
     foam_bridge: bool  # seed islands also from pieces joined across foam, some paired alone (`seeding.bridged_pairs`)
     passed_standing_ratio: float  # a candidate that passes ranks first when it stands >= this x the top, which fails
     twin_appearance: bool  # let the appearance cue choose between the first candidate and its head-to-tail twin
