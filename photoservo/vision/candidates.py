@@ -658,7 +658,7 @@ def foam_turns(results: list[tuple[Detection, Candidate]], searches: dict[str, P
         bar = score(c)[0] - w
         counted = sorted(((score(g), g) for g in fits), key=lambda sg: -sg[0][0])
         for (f, share), g in counted:
-            if f >= bar and share.min() >= p.foam_part_share:
+            if f >= bar and shares_under_foam(share, p.foam_part_share):
                 d_g = detect(g, search.model, search.frame, search.rig, search.fit_params, p, seed=seed, **looks)
                 if d_g.passed:
                     out[k] = (d_g, g)

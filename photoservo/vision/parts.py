@@ -183,14 +183,15 @@ def foam_share_inner(R: np.ndarray, t: np.ndarray, alpha: float, model: PhotoMod
     """(2,) the share of one pose's inner points on foam (`frame` from `foam_marked`) in the left and the
     right camera: points the fitness scores 0 (no hue) where a band of foam hides the creature. R (3, 3)
     the model's linear map, t (3,) mm in the left camera frame, alpha px/mm."""
-    return np.mean(inner_hues(R, t, alpha, model, frame, rig) == FOAM, axis=1)
+    return foam_shares(R, t, alpha, model, frame, rig)[0]
 
 
 def foam_shares(R: np.ndarray, t: np.ndarray, alpha: np.ndarray, model: PhotoModel, frame: StereoHue,
                 rig: Rig) -> np.ndarray:
     """(P, 2) `foam_share_inner` of a population: each pose's share of inner points on foam (`frame` from
-    `foam_marked`) in the left and the right camera. R (P, 3, 3) the models' linear maps, t (P, 3) mm,
-    alpha (P,) px/mm."""
+    `foam_marked`) in the left and the right camera, read as the fitness reads a point (nearest pixel,
+    outside the image not on foam). R (P, 3, 3) the models' linear maps, t (P, 3) mm, alpha (P,) px/mm
+    (or one pose: (3, 3), (3,), a float)."""
     p = project_model(R, t, alpha, model, rig)
     shares = []
     for uv, marked in ((p.inner_left, frame.left), (p.inner_right, frame.right)):
