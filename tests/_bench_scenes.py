@@ -3,6 +3,8 @@ JSON, and an estimate found within 5 %, for the tests of detection's rules on be
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 
 from photoservo.config import load_config
@@ -35,6 +37,15 @@ def found_within_5(sc, model, seed: int, p=None):
     truth = np.array(sc.truth["position_mm"])
     assert np.linalg.norm(np.array(est.position_mm) - truth) / truth[2] < 0.05
     return est
+
+
+def found_only_with(sc, model, seed: int, step: str):
+    """`found_within_5` with the config's estimator, and not found with its switch `step` (an
+    `EstimatorParams` bool, e.g. "grown_turns") off: the scene is found by that step."""
+    found_within_5(sc, model, seed)
+    without = estimate(model, sc.left, sc.right, sc.rig, CFG.ga, dataclasses.replace(CFG.estimator, **{step: False}),
+                       CFG.fitness, seed=seed)
+    assert not without.found
 
 
 def candidate(c: dict) -> Candidate:
