@@ -513,3 +513,24 @@ def test_a_layout_re_fit_that_only_rises_in_fitness_leaves_the_crate_as_it_was(m
     monkeypatch.setattr(candidates, "LAYOUT_RISE", -2.0)
     size[False] = _crate_size("left", 20)
     assert size[True] < 0.05 and size[False] > 0.15, size
+
+
+def test_the_fender_at_0_6x_is_too_few_points_for_a_layout_re_fit(monkeypatch):
+    """The fender's 0.6x photo, full size, estimator seed 19: 81 inner points, a grey layout too
+    noisy to tell a rise of LAYOUT_RISE (`candidates.layout_noisy`; the tank at 0.6x, 228 points, is re-fitted).
+    Re-fitted all the same, its layout rises 0.24 -> 0.55 on a fit 20.9 % off in size; left as it is, 12.0 %."""
+    from photoservo.vision import candidates, estimator
+
+    fender, = real_cases(CFG.photo_model, targets=("fender",), variants=("scaled",))
+    tank, = real_cases(CFG.photo_model, targets=("tank",), variants=("scaled",))
+    assert candidates.layout_noisy(fender.model) and not candidates.layout_noisy(tank.model)
+
+    def size() -> float:
+        est = estimator.estimate(fender.model, fender.left, fender.right, fender.rig, CFG.ga, CFG.estimator,
+                                 CFG.fitness, seed=19)
+        assert est.found and abs(est.position_mm[2] / fender.truth["distance_mm"] - 1) < 0.05
+        return abs(fender.truth["alpha_px_per_mm"] / est.alpha_px_per_mm - 1)
+
+    noisy = size()
+    monkeypatch.setattr(candidates, "layout_noisy", lambda model: False)
+    assert noisy < 0.15 < size(), noisy
