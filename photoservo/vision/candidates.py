@@ -323,7 +323,9 @@ def layout_refit(search: PoseSearch, c: Candidate, grey_frame: StereoGrey) -> Ge
     blurs that): their layouts read -0.35 to 0.49 against their truths' 0.46-0.81, met answers 0.55-0.69.
     Only where the layout itself rises by more than LAYOUT_RISE (else the rise is the fitness' own), and not on a
     photo whose layout is too noisy to tell such a rise (`layout_noisy`: no draw there, so its estimate is as
-    without the re-fit)."""
+    without the re-fit). The re-fit's GA is at aspect 1 (seeded with `c`'s R, position and alpha; the per-axis
+    size `aspect_refined` gave `c` is not carried): it replaces `c` only when, at aspect 1, it beats `c` as
+    scored at `c`'s own aspect, and the replacement has aspect 1."""
     if not np.isfinite(c.fitness) or layout_noisy(search.model):
         return c
     p = search.est_params
