@@ -43,13 +43,15 @@ def turned_scene():
 
 
 def run(turned_scene, twin_appearance: bool, max_absent_parts: float = CFG.estimator.max_absent_parts,
-        island_turn_gain: float = CFG.estimator.island_turn_gain, parted_turns: bool = CFG.estimator.parted_turns):
+        island_turn_gain: float = CFG.estimator.island_turn_gain, parted_turns: bool = CFG.estimator.parted_turns,
+        foam_turns: bool = CFG.estimator.foam_turns):
     """estimate() of the scene; `max_absent_parts` 1 turns the parts check off, and with it its
     bare-water rule (`bare_water_z` 0: vision/bare_parts.py judges the absent parts' pixels);
-    `parted_turns` False: a candidate failing its parts alone is not re-fitted turned."""
+    `parted_turns` False: a candidate failing its parts alone is not re-fitted turned; `foam_turns` False:
+    nor re-fitted turned counting the points on foam (`candidates.foam_turns`)."""
     sc, model = turned_scene
     p = dataclasses.replace(CFG.estimator, twin_appearance=twin_appearance, max_absent_parts=max_absent_parts,
-                            island_turn_gain=island_turn_gain, parted_turns=parted_turns,
+                            island_turn_gain=island_turn_gain, parted_turns=parted_turns, foam_turns=foam_turns,
                             bare_water_z=0.0 if max_absent_parts >= 1.0 else CFG.estimator.bare_water_z)
     est = estimate(model, sc.left, sc.right, sc.rig, CFG.ga, p, CFG.fitness, seed=21)
     t = np.array(sc.truth["position_mm"])
@@ -64,8 +66,10 @@ def test_the_appearance_cue_turns_a_head_to_tail_fit_back(turned_scene):
     est0, heading0, off0 = run(turned_scene, twin_appearance=False, max_absent_parts=1.0, island_turn_gain=1.0)
     est1, heading1, off1 = run(turned_scene, twin_appearance=True, island_turn_gain=1.0)
     assert est0.found and heading0 > 150  # hue alone (and no parts check): turned
-    # the parts check alone rejects the turned fit (its arms lie where the mantle's tip should be)...
-    assert not run(turned_scene, twin_appearance=False, island_turn_gain=1.0, parted_turns=False)[0].found
+    # the parts check alone rejects the turned fit (its arms lie where the mantle's tip should be; neither
+    # quarter-turn re-fit: candidates.foam_turns re-fits it turned too)...
+    assert not run(turned_scene, twin_appearance=False, island_turn_gain=1.0, parted_turns=False,
+                   foam_turns=False)[0].found
     # ...and re-fitted at its quarter turns (candidates.parted_turns) it is the right way round, within 5 %
     est2, heading2, off2 = run(turned_scene, twin_appearance=False, island_turn_gain=1.0)
     assert est2.found and heading2 < 10 and off2 < 0.05
