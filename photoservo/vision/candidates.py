@@ -119,18 +119,20 @@ def stereo_depth(first: tuple[Detection, Candidate], search: PoseSearch, left_bg
 
 
 def at_stereo_depth(search: PoseSearch, c: Candidate, left_bgr: np.ndarray, right_bgr: np.ndarray,
-                    rng: np.random.Generator, p: EstimatorParams) -> Generator[int, None, Candidate | None]:
+                    rng: np.random.Generator, p: EstimatorParams, aspect_rng: np.random.Generator | None = None
+                    ) -> Generator[int, None, Candidate | None]:
     """`c` searched again at the depth both images see under it (`stereo_plane.stereo_depth_ratio` r, more
     than STEREO_DEPTH_MIN and at most STEREO_DEPTH_TOL off): slid along its line of sight to r t, alpha / r,
-    re-fitted by a short GA in the twins' window (random stream `rng`) and per axis (`aspect_refined`);
-    None where the two images see it at its depth or say nothing (`stereo_depth`, `plane_turned`)."""
+    re-fitted by a short GA in the twins' window (random stream `rng`) and per axis (`aspect_refined`, on
+    `aspect_rng`; default: the search's stream); None where the two images see it at its depth or say
+    nothing (`stereo_depth`, `plane_turned`)."""
     r = stereo_depth_ratio(c.R_model, c.position_mm, c.alpha, search.model, grey(left_bgr), grey(right_bgr),
                            search.rig, on_target=on_target_hue(search.model, search.frame.left))
     if not (np.isfinite(r) and math.log(STEREO_DEPTH_MIN) < abs(math.log(r)) <= math.log(STEREO_DEPTH_TOL)):
         return None
     t = yield from search.local_steps(c.R, r * np.asarray(c.position_mm), c.alpha / r, position_frac=0.03,
                                       heading_deg=15.0, tilt_deg=15.0, alpha_frac=0.08, rng=rng)
-    t = yield from aspect_refined(search, dataclasses.replace(t, source=c.source), p)
+    t = yield from aspect_refined(search, dataclasses.replace(t, source=c.source), p, aspect_rng)
     return dataclasses.replace(t, generations=search.ga.generation)
 
 
@@ -161,7 +163,7 @@ def stereo_tilt(first: tuple[Detection, Candidate], search: PoseSearch, left_bgr
 
 
 def plane_turned(search: PoseSearch, c: Candidate, left_bgr: np.ndarray, right_bgr: np.ndarray,
-                 p: EstimatorParams) -> Generator[int, None, Candidate]:
+                 p: EstimatorParams, rng: np.random.Generator | None = None) -> Generator[int, None, Candidate]:
     """Where hue bounds the target, a fit whose tilt the stereo plane under it contradicts by more than
     PLANE_TURN_MIN_DEG (for the leading island's, after the hue fitness vetoed its narrow re-fit on that
     plane: `PoseSearch.tilt_steps`, heading and scale held near; `stereo_tilt`'s passing first candidate;
@@ -177,7 +179,10 @@ def plane_turned(search: PoseSearch, c: Candidate, left_bgr: np.ndarray, right_b
     near, 0.66 or less); turned and followed, 0.792, 7 deg and 3.4 % off, its plane re-measured 1.3 deg from
     it. A plane measured on glints beside a small far squid (renderer 1138, 60 deg from the fit, 87 from the
     truth) leaves a re-fit below the tolerance. Own random streams (`Generator.spawn`): where nothing is
-    kept, the search goes on as before. `c` as it is otherwise. One generation per step."""
+    kept, the search goes on as before. Given `rng`, every draw is from children of it, the per-axis
+    re-fits' too, and the search's stream is untouched (`parted_turns`: later spawns as without the step);
+    else the streams are children of the search's and the per-axis re-fits draw from it. `c` as it is
+    otherwise. One generation per step."""
     if not p.plane_refine or not np.isfinite(c.fitness):
         return c
     on_target = on_target_hue(search.model, search.frame.left)
@@ -185,12 +190,15 @@ def plane_turned(search: PoseSearch, c: Candidate, left_bgr: np.ndarray, right_b
     plane = fit_target_plane(c.R, c.position_mm, c.alpha, search.model, gl, gr, search.rig, on_target=on_target)
     if plane is None or _off_plane_deg(c, plane) <= PLANE_TURN_MIN_DEG:
         return c
-    turn_rng, depth_rng = search.ga.rng.spawn(2)  # own streams: where nothing is kept, the search goes on as before
+    if rng is None:  # own streams: where nothing is kept, the search goes on as before
+        (turn_rng, depth_rng), aspect_rngs = search.ga.rng.spawn(2), (None, None)
+    else:  # every draw from `rng`'s children: the search's stream untouched
+        turn_rng, depth_rng, *aspect_rngs = rng.spawn(4)
     t = yield from search.tilt_steps(c, left_bgr, right_bgr, follow=True, rng=turn_rng)
     if t is c:
         return c
-    t = yield from aspect_refined(search, t, p)
-    d = yield from at_stereo_depth(search, t, left_bgr, right_bgr, depth_rng, p)
+    t = yield from aspect_refined(search, t, p, aspect_rngs[0])
+    d = yield from at_stereo_depth(search, t, left_bgr, right_bgr, depth_rng, p, aspect_rngs[1])
     if d is not None and d.fitness >= t.fitness - p.plane_fitness_tol:
         t = d
     if t.fitness < c.fitness - p.plane_fitness_tol:
@@ -442,13 +450,14 @@ def shrunk_turns(search: PoseSearch, c: Candidate, f: float, min_gain: float) ->
     return dataclasses.replace(best, source=c.source) if best is not c else c
 
 
-def aspect_refined(search: PoseSearch, c: Candidate, p: EstimatorParams) -> Generator[int, None, Candidate]:
+def aspect_refined(search: PoseSearch, c: Candidate, p: EstimatorParams, rng: np.random.Generator | None = None
+                   ) -> Generator[int, None, Candidate]:
     """`c` re-fitted per photo axis (`PoseSearch.refine_aspect`, alpha_x / alpha_y within a factor
-    `aspect_max`), kept when it fits at least `aspect_min_gain` better; one step (its generations).
-    `c` as it is when the per-axis size is off or c has no fitness."""
+    `aspect_max`; random stream `rng`, default the search's), kept when it fits at least `aspect_min_gain`
+    better; one step (its generations). `c` as it is when the per-axis size is off or c has no fitness."""
     if p.aspect_max > 1.0 and np.isfinite(c.fitness):
         g0 = search.ga.generation
-        k = search.refine_aspect(c, p.aspect_max)
+        k = search.refine_aspect(c, p.aspect_max, rng)
         if k.fitness >= c.fitness + p.aspect_min_gain:
             c = k
         yield search.ga.generation - g0
@@ -551,6 +560,9 @@ def grown_outlines(results: list[tuple[Detection, Candidate]], searches: dict[st
 # tilt +- QUARTER_TILT_DEG, position +- 3 % of the depth and alpha +- 8 %
 PARTED_QUARTERS = (0, 1, -1, 2)
 PARTED_HEADING_DEG = 45.0
+# the spawn key of `parted_turns`' plane step's random streams (candidate k's: a child of (this, k) of the
+# estimate's seed): no spawn of the acquisition's reaches it (estimator.BRIDGED_STREAMS is 1 << 20)
+PARTED_PLANE_STREAMS = 1 << 21
 
 
 def parted_turns(results: list[tuple[Detection, Candidate]], searches: dict[str, PoseSearch], looks: dict,
@@ -570,9 +582,10 @@ def parted_turns(results: list[tuple[Detection, Candidate]], searches: dict[str,
     `left_bgr`, `right_bgr`) replaces it when it fits better and passes: an island's GA can end at the
     creature's place tilted off it by more than the turns' tilt window (harbour 2744, a crab of the same
     photo tilted 38 deg: fitted at 11, 43 deg off its plane, 0.806 with 3 parts absent; on the plane
-    0.959, 0.26 % off). Own random streams (`Generator.spawn`, one per turn whether tried or not;
-    `plane_turned` spawns its own only where the plane contradicts the fit): the search's stream is as
-    before. `searches`, `looks`: as `grown_outlines`'. One generation per step."""
+    0.959, 0.26 % off). Own random streams (`Generator.spawn`, one per turn whether tried or not): the
+    search's stream is as before; the plane step's are fixed (candidate k's from the spawn key
+    (PARTED_PLANE_STREAMS, k) of `seed`), so that where it replaces nothing the later steps (`grown_turns`,
+    `stereo_tilt`) draw as without it. `searches`, `looks`: as `grown_outlines`'. One generation per step."""
     out = list(results)
     for k, (d, c) in enumerate(results):
         if not d.fails_on_parts or not np.isfinite(c.fitness):
@@ -592,7 +605,8 @@ def parted_turns(results: list[tuple[Detection, Candidate]], searches: dict[str,
                 continue
         if left_bgr is None or right_bgr is None or search.frame.chroma is not None:
             continue  # the contour regime: the stereo plane is not this step's
-        turned = yield from plane_turned(search, c, left_bgr, right_bgr, p)
+        plane_rng = np.random.default_rng(np.random.SeedSequence(seed, spawn_key=(PARTED_PLANE_STREAMS, k)))
+        turned = yield from plane_turned(search, c, left_bgr, right_bgr, p, plane_rng)
         if turned is c or not turned.fitness > c.fitness:
             continue
         turned = dataclasses.replace(turned, source=c.source, generations=search.ga.generation)

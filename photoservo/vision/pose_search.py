@@ -212,11 +212,12 @@ class PoseSearch:
         self.ga.generation += c.generations
         return c
 
-    def refine_aspect(self, best: Candidate, aspect_max: float) -> Candidate:
+    def refine_aspect(self, best: Candidate, aspect_max: float, rng: np.random.Generator | None = None) -> Candidate:
         """Per-axis size (the variable photo-model's alpha_x, alpha_y): a short GA of its own over
         the 7 pose genes in a narrow window around `best` plus an 8th, ln k in +- ln aspect_max,
         the photo's columns scaled by k and its rows by 1/k (`Candidate.aspect`). Returns the best
-        of that search (its work counted in this search's generations and evaluations)."""
+        of that search (its work counted in this search's generations and evaluations). `rng`: its
+        own random stream (default: this search's)."""
         p = self.est_params
         short = dataclasses.replace(p, min_generations=max(1, p.patience // 2), patience=max(2, p.patience // 2),
                                     max_generations=max(p.patience, p.max_generations // 4))
@@ -235,7 +236,7 @@ class PoseSearch:
             return out
 
         g0 = np.append(self.space.encode(best.R, best.position_mm, best.alpha)[0], math.log(best.aspect) * 2.0)
-        ga = GA(f, region, self.ga.params, self.ga.rng, seeds=g0[None])
+        ga = GA(f, region, self.ga.params, rng or self.ga.rng, seeds=g0[None])
         conv = Convergence(short)
         for _ in range(short.max_generations):
             g, fit = ga.step(1)
