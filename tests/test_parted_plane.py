@@ -20,9 +20,33 @@ def test_a_crab_fitted_off_its_plane_with_parts_absent_is_found_on_the_plane(mon
     est = found_within_5(sc, model, seed=1744)
     assert est.fitness > 0.9
 
-    def unturned(search, c, left_bgr, right_bgr, p):
+    def unturned(search, c, left_bgr, right_bgr, p, rng=None):
         return c
         yield
 
     monkeypatch.setattr(candidates, "plane_turned", unturned)
     assert not estimate(model, sc.left, sc.right, sc.rig, CFG.ga, P, CFG.fitness, seed=1744).found
+
+
+def test_the_plane_step_leaves_the_islands_streams_as_it_found_them(monkeypatch):
+    # harbour 1017 (benchmarks/accuracy.py --generator harbour, tuned): another individual's fish split by foam,
+    # whose candidates fail their parts alone with the stereo plane more than 20 deg off the fit; the plane step
+    # searches and replaces nothing. Its draws are from a stream of its own (PARTED_PLANE_STREAMS): each island's
+    # stream, the spawns of `grown_turns` and `stereo_tilt` after it among them, is as it was before the step
+    states = []
+
+    def state(search):
+        bits = search.ga.rng.bit_generator
+        return bits.state, bits.seed_seq.n_children_spawned
+
+    def recorded(search, c, *args):
+        before = state(search)
+        t = yield from plane_turned(search, c, *args)
+        states.append(before == state(search))
+        return t
+
+    plane_turned = candidates.plane_turned
+    monkeypatch.setattr(candidates, "plane_turned", recorded)
+    sc, model = harbour_scene(1017, kind="fish", other_photo=True, foam_split=True)
+    assert not estimate(model, sc.left, sc.right, sc.rig, CFG.ga, P, CFG.fitness, seed=17).found
+    assert states and all(states)
