@@ -236,7 +236,7 @@ class PoseSearch:
             return out
 
         g0 = np.append(self.space.encode(best.R, best.position_mm, best.alpha)[0], math.log(best.aspect) * 2.0)
-        ga = GA(f, region, self.ga.params, rng or self.ga.rng, seeds=g0[None])
+        ga = GA(f, region, self.ga.params, self.ga.rng if rng is None else rng, seeds=g0[None])
         conv = Convergence(short)
         for _ in range(short.max_generations):
             g, fit = ga.step(1)
