@@ -6,11 +6,14 @@ benchmarks/accuracy.py with its seeds."""
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
-from _bench_scenes import found_only_with, renderer_scene
+from _bench_scenes import found_within_5, renderer_scene
 
 from photoservo.config import load_config
 from photoservo.vision.appearance import stereo_value
+from photoservo.vision.estimator import estimate
 from photoservo.vision.fitness import fitness, point_weight, stereo_hue
 from photoservo.vision.parts import foam_marked, foam_share_inner, foam_shares
 from photoservo.vision.pose_search import PoseSearch
@@ -25,7 +28,9 @@ def test_a_split_squid_fitted_head_to_tail_beside_the_band_is_found_re_fitted_co
     # quarter of the truth's inner points on foam), 3 parts absent, one on bare water. The half turn's re-fit
     # counting foam (0.774 so counted, against the candidate's 0.723) passes 1.6 % off
     sc, model = renderer_scene(2926, kind="squid", split=True)
-    found_only_with(sc, model, seed=1926, step="foam_turns")
+    # the step is off in the config (configs/default.toml: it found renderer look-alike null 1853)
+    assert not estimate(model, sc.left, sc.right, sc.rig, CFG.ga, P, CFG.fitness, seed=1926).found
+    found_within_5(sc, model, seed=1926, p=dataclasses.replace(P, foam_turns=True))
 
 
 def test_the_foam_counted_search_scores_the_fitness_plus_the_points_on_foam():
