@@ -5,10 +5,11 @@ standing (`ranked`, vision/detection.py; where the contour rule scores, those wh
 two surfaces last: `same_surface_first`), the first candidate's twin chosen by the appearance cue
 (`appearance_twin`), the candidates failing their outline alone tried grown (`grown_outlines`), those
 failing their parts alone re-fitted at quarter turns (`parted_turns`), those whose outline spills
-re-fitted turned and grown (`grown_turns`), those failing their parts alone re-fitted at quarter turns counting
-the points on foam (`foam_turns`), and the first, when it passes, searched again at the
-depth both images see (`stereo_depth`). Each search step is a generator yielding the GA generations it ran (`pose_search.drive` runs one to its end; the
-tracker spreads them over camera frames)."""
+re-fitted turned and grown (`grown_turns`), those failing their parts alone re-fitted at quarter turns
+counting the points on foam (`foam_turns`; `[estimator] foam_turns`, off in configs/default.toml), and the
+first, when it passes, searched again at the depth both images see (`stereo_depth`). Each search step is a
+generator yielding the GA generations it ran (`pose_search.drive` runs one to its end; the tracker spreads
+them over camera frames)."""
 
 from __future__ import annotations
 
@@ -300,7 +301,9 @@ LAYOUT_RISE = 0.1
 
 def layout_noisy(model: PhotoModel) -> bool:
     """The photo's grey layout is too noisy for `layout_refit`: a correlation over n inner points varies by
-    ~1/sqrt(n), which reaches LAYOUT_RISE at n <= 1 / LAYOUT_RISE^2 (100 points)."""
+    ~1/sqrt(n), which reaches LAYOUT_RISE at n <= 1 / LAYOUT_RISE^2 (100 points). n is all of the model's
+    inner points (`PhotoModel.inner_uv`): `appearance.appearance` correlates only those landing on a target
+    hue in each camera, fewer, so the bound is the lenient one."""
     return len(model.inner_uv) * LAYOUT_RISE ** 2 <= 1.0
 
 

@@ -31,10 +31,11 @@ the creature itself), then each that fails its parts alone is re-fitted at quart
 legs beside the creature's; where hue bounds the target and no turn passes, it is turned onto the plane
 both images see under it, a fit tilted off the creature having them beside it too), then each whose
 outline spills, whatever its parts say, is re-fitted at quarter turns grown (`candidates.grown_turns`: a
-fit shrunk inside the creature and turned on it), then, where hue bounds the target, each that fails its
-parts alone is re-fitted at quarter turns counting its inner points on foam as matches
-(`candidates.foam_turns`: a fit beside a foam band across the creature outscores the whole creature, whose
-points under the band score 0). Where hue bounds the target, a first candidate that passes is searched
+fit shrunk inside the creature and turned on it), then, where hue bounds the target and `foam_turns` is on
+(off in configs/default.toml: it found renderer look-alike null 1853), each that fails its parts alone is
+re-fitted at quarter turns counting its inner points on foam as matches (`candidates.foam_turns`: a fit
+beside a foam band across the creature outscores the whole creature, whose points under the band score
+0). Where hue bounds the target, a first candidate that passes is searched
 again on the plane both images see under it where its tilt contradicts that plane
 (`candidates.stereo_tilt`), and at the depth both images see under it (`candidates.stereo_depth`).
 
