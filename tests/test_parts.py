@@ -164,13 +164,15 @@ def test_a_split_squid_with_a_part_at_the_band_edge_is_found():
     a foam band, same photo. The GA's best slides along the body (5.7 % off, parts on water) and
     the islands near the truth (1.7-1.8 %) had 2-3 of 12 parts absent, one of them straddling the
     band's pale edge (the bare-water rule then rejects two absent with one bare): not found. With
-    the parts on foam unjudged (`[estimator] foam_part_share`) a fit within 2 % passes."""
+    the parts on foam unjudged (`[estimator] foam_part_share`) a fit within 2 % passes. Judged, with
+    the plane turn on its own stream (fde3377) `parted_turns` finds it 2.75 % off, so the counterfactual
+    turns that step off too: the rule, not the plane turn, is what finds it within 2 %."""
     sc, model = _scene(1234, kind="squid", split=True)
     est = estimate(model, sc.left, sc.right, sc.rig, CFG.ga, CFG.estimator, CFG.fitness, seed=234)
     t = np.array(sc.truth["position_mm"])
     assert est.found and np.linalg.norm(est.position_mm - t) <= 0.02 * t[2]
-    off = estimate(model, sc.left, sc.right, sc.rig, CFG.ga, dataclasses.replace(P, foam_part_share=1.0),
-                   CFG.fitness, seed=234)
+    off = estimate(model, sc.left, sc.right, sc.rig, CFG.ga,
+                   dataclasses.replace(P, foam_part_share=1.0, parted_turns=False), CFG.fitness, seed=234)
     assert not off.found
 
 
